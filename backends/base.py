@@ -1,0 +1,167 @@
+"""The one interface every tracer backend implements, and the registry that picks one.
+
+Systems talk to a backend only through :class:`Backend`. A backend imports
+its heavy dependency lazily (inside ``probe``/``__init__``), so importing this
+module never needs moderngl or pyopencl, and a backend that cannot run says
+why instead of crashing its caller.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import sys
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from engine.errors import AberrantError, BackendUnavailable
+from engine.layout import Precision
+from engine.packing import CameraView, PackedScene, TableUpdate
+
+#: Outputs a backend can write (DESIGN.md section 5).
+AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")
+
+#: Registered backends: name -> "module:Class", imported on first use.
+BACKENDS: dict[str, str] = {
+    "reference": "backends.reference.backend:ReferenceBackend",
+    "glsl": "backends.glsl.backend:GlslBackend",
+    "opencl": "backends.opencl.backend:OpenClBackend",
+}
+
+#: ``auto`` tries these in order: fastest first.
+AUTO_ORDER: tuple[str, ...] = ("opencl", "glsl", "reference")
+
+
+@dataclass
+class Frame:
+    """A rendered frame's AOVs (row 0 = top) and how long it took."""
+
+    width: int
+    height: int
+    color: np.ndarray | None = None  # (H, W, 4) uint8
+    depth: np.ndarray | None = None  # (H, W) float32, path length L, +inf on a miss
+    perceived: np.ndarray | None = None  # (H, W) float32, perceived length
+    instance: np.ndarray | None = None  # (H, W) int32, entity id, -1 on a miss
+    events: np.ndarray | None = None  # (H, W) uint8
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    def aov(self, name: str) -> np.ndarray:
+        value = getattr(self, name, None) if name in AOVS else None
+        if value is None:
+            raise KeyError(f"this frame has no {name!r} AOV (rendered: {', '.join(self.present())})")
+        return value
+
+    def present(self) -> list[str]:
+        return [name for name in AOVS if getattr(self, name) is not None]
+
+
+class Backend(ABC):
+    """A tracer: uploads packed scene tables, renders frames."""
+
+    name: ClassVar[str]
+    #: Precisions this backend can trace at (the first is its default).
+    precisions: ClassVar[tuple[Precision, ...]] = ("f32",)
+
+    def __init__(self, precision: Precision | None = None) -> None:
+        precision = precision or self.precisions[0]
+        if precision not in self.precisions:
+            raise BackendUnavailable(
+                f"{self.name} backend cannot trace at precision {precision!r}; it offers {', '.join(self.precisions)}"
+            )
+        self.precision: Precision = precision
+
+    #: Whether the packed tables should be relative to a floating origin near the camera.
+    camera_relative: ClassVar[bool] = True
+
+    @classmethod
+    @abstractmethod
+    def probe(cls) -> str | None:
+        """``None`` when this backend can run here, otherwise the reason and what to install."""
+
+    def info(self) -> dict[str, str]:
+        """Device, driver and version facts for ``aberrant backends``."""
+        return {}
+
+    @abstractmethod
+    def upload(self, packed: PackedScene, updates: Sequence[TableUpdate]) -> int:
+        """Upload the changed tables; returns the bytes transferred."""
+
+    @abstractmethod
+    def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
+        """Trace one frame of the uploaded scene from ``camera``."""
+
+    def release(self) -> None:  # noqa: B027 - optional hook, most backends override it
+        """Free device resources (idempotent)."""
+
+    def __enter__(self) -> Backend:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def backend_class(name: str) -> type[Backend]:
+    """The class registered under ``name`` (imports its module, not its heavy dependency)."""
+    try:
+        target = BACKENDS[name]
+    except KeyError:
+        raise AberrantError(f"unknown backend {name!r}; choose one of {', '.join([*BACKENDS, 'auto'])}") from None
+    module_name, _, class_name = target.partition(":")
+    return getattr(importlib.import_module(module_name), class_name)
+
+
+def probe(name: str) -> str | None:
+    """Why ``name`` cannot run here, or ``None``; never raises for a known name."""
+    try:
+        return backend_class(name).probe()
+    except AberrantError:
+        raise
+    except Exception as e:  # a broken optional install must not crash the caller
+        return f"{type(e).__name__}: {e}"
+
+
+def default_backend_name() -> str:
+    return os.environ.get("ABERRANT_BACKEND", "auto") or "auto"
+
+
+def resolve_name(name: str | None = None, *, fallback: bool = True, log: object = None) -> str:
+    """Turn ``name`` (or ``ABERRANT_BACKEND``, or ``auto``) into a backend that can run here.
+
+    ``auto`` picks the fastest available and says which. A named backend that
+    cannot run falls back to ``auto`` with a message when ``fallback`` is
+    true, and raises :class:`BackendUnavailable` otherwise.
+    """
+    say = log if callable(log) else (lambda message: print(message, file=sys.stderr))
+    name = name or default_backend_name()
+    if name != "auto":
+        reason = probe(name)
+        if reason is None:
+            return name
+        if not fallback:
+            raise BackendUnavailable(f"{name} backend cannot run here: {reason}")
+        say(f"aberrant: {name} backend cannot run here ({reason}); falling back to auto")
+    reasons = []
+    for candidate in AUTO_ORDER:
+        reason = probe(candidate)
+        if reason is None:
+            say(f"aberrant: auto chose the {candidate} backend")
+            return candidate
+        reasons.append(f"{candidate}: {reason}")
+    raise BackendUnavailable("no backend can run here: " + "; ".join(reasons))  # pragma: no cover
+
+
+def create_backend(
+    name: str | None = None, *, precision: Precision | None = None, fallback: bool = True, log: object = None
+) -> Backend:
+    """A ready backend, chosen as :func:`resolve_name` does."""
+    return backend_class(resolve_name(name, fallback=fallback, log=log))(precision=precision)
+
+
+def required_backends() -> list[str]:
+    """Backends that must run here (``ABERRANT_REQUIRE_BACKENDS``, comma-separated), for tests and CI."""
+    raw = os.environ.get("ABERRANT_REQUIRE_BACKENDS", "")
+    return [name.strip() for name in raw.split(",") if name.strip()]

@@ -1,0 +1,86 @@
+"""Checks shared by the component dataclasses.
+
+Every failure raises :class:`ValidationError` carrying the dotted field path,
+so scene files, the builder API and the editor can all say *which* field of
+*which* entity is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+Color = tuple[float, float, float]
+
+
+class ValidationError(ValueError):
+    """A component field holds a value the engine cannot use."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field}: {message}")
+        self.field = field
+        self.message = message
+
+    def within(self, prefix: str) -> ValidationError:
+        """The same error with its field path nested under ``prefix``."""
+        return ValidationError(f"{prefix}.{self.field}" if prefix else self.field, self.message)
+
+
+def real(value: object, field: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValidationError(field, f"expected a number, got {type(value).__name__} {value!r}")
+    result = float(value)
+    if not math.isfinite(result):
+        raise ValidationError(field, f"must be finite, got {result}")
+    return result
+
+
+def vector(value: object, n: int, field: str) -> tuple[float, ...]:
+    if isinstance(value, str | bytes) or (not isinstance(value, Sequence) and not hasattr(value, "__len__")):
+        raise ValidationError(field, f"expected {n} numbers, got {type(value).__name__} {value!r}")
+    items = list(value)  # type: ignore[call-overload]
+    if len(items) != n:
+        raise ValidationError(field, f"expected {n} numbers, got {len(items)}")
+    return tuple(real(x, f"{field}[{i}]") for i, x in enumerate(items))
+
+
+def vec3(value: object, field: str) -> Vec3:
+    return vector(value, 3, field)  # type: ignore[return-value]
+
+
+def color(value: object, field: str) -> Color:
+    rgb = vec3(value, field)
+    for i, c in enumerate(rgb):
+        if not 0.0 <= c <= 1.0:
+            raise ValidationError(f"{field}[{i}]", f"colour components lie in [0, 1], got {c}")
+    return rgb
+
+
+def unit_quaternion(value: object, field: str, tolerance: float = 1e-4) -> Quat:
+    q = vector(value, 4, field)
+    norm = math.sqrt(sum(c * c for c in q))
+    if abs(norm - 1.0) > tolerance:
+        raise ValidationError(
+            field, f"quaternion (x, y, z, w) must have unit length, got length {norm:.6g}; normalise it"
+        )
+    return q  # type: ignore[return-value]
+
+
+def choice(value: object, options: Sequence[str], field: str) -> str:
+    if value not in options:
+        raise ValidationError(field, f"must be one of {', '.join(map(repr, options))}, got {value!r}")
+    return value  # type: ignore[return-value]
+
+
+def boolean(value: object, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise ValidationError(field, f"expected true or false, got {value!r}")
+    return value
+
+
+def integer(value: object, field: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValidationError(field, f"expected an integer, got {value!r}")
+    return value

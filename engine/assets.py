@@ -1,0 +1,210 @@
+"""Mesh assets: triangle meshes from files (through trimesh) or built-in primitives.
+
+An asset is object-space geometry shared by every entity that uses it. Files
+are read once: the library caches by resolved path and file content hash, so
+two entities naming one file share one asset, and an edited file is re-read.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from engine.errors import AberrantError
+
+MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
+PRIMITIVES = ("box", "plane", "quad", "sphere", "pyramid", "cylinder")
+
+
+class AssetError(AberrantError, ValueError):
+    """A mesh asset cannot be loaded or is unusable."""
+
+
+@dataclass(frozen=True, eq=False)
+class MeshAsset:
+    """Object-space triangles: float32 vertices (N, 3), int32 faces (M, 3), optional float32 UVs (N, 2)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None
+    source: str
+    content_hash: str = field(default="")
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.faces.shape[0])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+
+def make_asset(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, source: str) -> MeshAsset:
+    """Validate and freeze geometry; the content hash identifies it everywhere (BVH cache, packing)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
+    f = np.ascontiguousarray(faces, dtype=np.int32)
+    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
+        raise AssetError(f"{source}: holds no triangles (faces of shape {f.shape}); export it as a triangle mesh")
+    if not np.all(np.isfinite(v)):
+        raise AssetError(f"{source}: vertex coordinates contain NaN or infinity")
+    if f.min() < 0 or f.max() >= len(v):
+        raise AssetError(f"{source}: face indices out of range [0, {len(v)})")
+    uv = None
+    if uvs is not None:
+        uv = np.ascontiguousarray(uvs, dtype=np.float32).reshape(-1, 2)
+        if len(uv) != len(v) or not np.all(np.isfinite(uv)):
+            uv = None  # unusable UVs: fall back to triplanar texturing rather than failing the load
+    h = hashlib.sha256()
+    for a in (v, f) + ((uv,) if uv is not None else ()):
+        h.update(a.tobytes())
+    for a in (v, f) + ((uv,) if uv is not None else ()):
+        a.setflags(write=False)
+    return MeshAsset(v, f, uv, source, h.hexdigest())
+
+
+# --- primitives ---------------------------------------------------------------
+
+
+def _box() -> MeshAsset:
+    """The unit cube [-1/2, 1/2]^3 with a UV square per face (24 vertices, outward winding)."""
+    verts, uvs, faces = [], [], []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            u_axis, v_axis = (axis + 1) % 3, (axis + 2) % 3
+            base = len(verts)
+            for du, dv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = [0.0, 0.0, 0.0]
+                p[axis] = 0.5 * sign
+                p[u_axis] = 0.5 * du
+                p[v_axis] = 0.5 * dv
+                verts.append(p)
+                uvs.append([(du + 1) / 2, (dv + 1) / 2])
+            quad = [(0, 1, 2), (0, 2, 3)] if sign > 0 else [(0, 2, 1), (0, 3, 2)]
+            faces += [[base + a, base + b, base + c] for a, b, c in quad]
+    return make_asset(np.array(verts), np.array(faces), np.array(uvs), "primitive:box")
+
+
+def _plane() -> MeshAsset:
+    """The unit square [-1/2, 1/2]^2 in XZ, facing +Y (a floor)."""
+    v = np.array([[-0.5, 0, 0.5], [0.5, 0, 0.5], [0.5, 0, -0.5], [-0.5, 0, -0.5]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+    return make_asset(v, np.array([[0, 1, 2], [0, 2, 3]]), uv, "primitive:plane")
+
+
+def _quad() -> MeshAsset:
+    """The square [-1, 1]^2 in XY facing +Z: the same shape as a portal."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+    return make_asset(v, np.array([[0, 1, 2], [0, 2, 3]]), uv, "primitive:quad")
+
+
+def _sphere(subdivisions: int = 3) -> MeshAsset:
+    """An icosphere of radius 1/2 (closed, shared vertices)."""
+    import trimesh
+
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.5)
+    return make_asset(m.vertices, m.faces, None, "primitive:sphere")
+
+
+def _pyramid() -> MeshAsset:
+    """Square base [-1/2, 1/2]^2 at y = -1/2, apex at (0, 1/2, 0)."""
+    v = np.array([[-0.5, -0.5, -0.5], [0.5, -0.5, -0.5], [0.5, -0.5, 0.5], [-0.5, -0.5, 0.5], [0, 0.5, 0]])
+    f = np.array([[0, 1, 2], [0, 2, 3], [3, 2, 4], [2, 1, 4], [1, 0, 4], [0, 3, 4]])
+    return make_asset(v, f, None, "primitive:pyramid")
+
+
+def _cylinder(segments: int = 32) -> MeshAsset:
+    """Radius 1/2, height 1 along Y, centred; closed with caps."""
+    a = np.linspace(0.0, 2.0 * math.pi, segments, endpoint=False)
+    ring = np.column_stack([0.5 * np.cos(a), np.zeros(segments), -0.5 * np.sin(a)])
+    bottom, top = ring + np.array([0.0, -0.5, 0.0]), ring + np.array([0.0, 0.5, 0.0])
+    v = np.vstack([bottom, top, [[0, -0.5, 0], [0, 0.5, 0]]])
+    cb, ct = 2 * segments, 2 * segments + 1
+    faces = []
+    for i in range(segments):
+        j = (i + 1) % segments
+        faces += [[i, j, segments + j], [i, segments + j, segments + i]]
+        faces += [[cb, j, i], [ct, segments + i, segments + j]]
+    return make_asset(v, np.array(faces), None, "primitive:cylinder")
+
+
+_PRIMITIVE_BUILDERS = {
+    "box": _box,
+    "plane": _plane,
+    "quad": _quad,
+    "sphere": _sphere,
+    "pyramid": _pyramid,
+    "cylinder": _cylinder,
+}
+
+
+class AssetLibrary:
+    """Loads each mesh file once and builds each primitive once."""
+
+    def __init__(self) -> None:
+        self._primitives: dict[str, MeshAsset] = {}
+        self._by_stat: dict[tuple[str, int, int], MeshAsset] = {}
+        self._by_content: dict[str, MeshAsset] = {}
+
+    def primitive(self, name: str) -> MeshAsset:
+        if name not in _PRIMITIVE_BUILDERS:
+            raise AssetError(f"unknown primitive {name!r}; primitives are {', '.join(PRIMITIVES)}")
+        if name not in self._primitives:
+            self._primitives[name] = _PRIMITIVE_BUILDERS[name]()
+        return self._primitives[name]
+
+    def load(self, path: str | Path) -> MeshAsset:
+        p = Path(path).expanduser()
+        try:
+            resolved = p.resolve(strict=True)
+            st = resolved.stat()
+        except FileNotFoundError:
+            raise AssetError(f"{p}: mesh file not found") from None
+        except OSError as e:
+            raise AssetError(f"{p}: cannot read mesh file ({e.strerror})") from None
+        if not resolved.is_file():
+            raise AssetError(f"{p}: not a file")
+        key = (str(resolved), st.st_mtime_ns, st.st_size)
+        if key in self._by_stat:
+            return self._by_stat[key]
+        data = resolved.read_bytes()
+        digest = hashlib.sha256(data).hexdigest()
+        asset = self._by_content.get(digest)
+        if asset is None:
+            asset = _load_mesh_file(resolved, data)
+            self._by_content[digest] = asset
+        self._by_stat[key] = asset
+        return asset
+
+
+def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise AssetError(f"{path}: unsupported mesh format {suffix or '(none)'}; use one of {', '.join(MESH_SUFFIXES)}")
+    if not data.strip():
+        raise AssetError(f"{path}: the file is empty")
+    import io
+
+    import trimesh
+
+    try:
+        loaded = trimesh.load(
+            io.BytesIO(data), file_type=suffix.lstrip("."), force="mesh", process=False, resolver=_resolver(path)
+        )
+    except Exception as e:  # trimesh raises many types on malformed files
+        raise AssetError(f"{path}: cannot parse mesh ({type(e).__name__}: {e})") from None
+    faces = getattr(loaded, "faces", None)
+    vertices = getattr(loaded, "vertices", None)
+    if faces is None or vertices is None or len(faces) == 0:
+        raise AssetError(f"{path}: holds no triangles")
+    uv = getattr(getattr(loaded, "visual", None), "uv", None)
+    return make_asset(np.asarray(vertices), np.asarray(faces), None if uv is None else np.asarray(uv), str(path))
+
+
+def _resolver(path: Path) -> object:
+    import trimesh
+
+    return trimesh.resolvers.FilePathResolver(str(path))

@@ -1,0 +1,26 @@
+"""Errors a user can act on. The CLI prints them as one line and exits with status 2."""
+
+from __future__ import annotations
+
+
+class AberrantError(Exception):
+    """Base of every error caused by input (files, parameters, arguments), not by a bug."""
+
+
+class SceneError(AberrantError, ValueError):
+    """A scene is inconsistent or one of its values is invalid; names the entity and field."""
+
+    def __init__(self, message: str, *, entity: str | None = None, field: str | None = None) -> None:
+        where = ""
+        if entity is not None:
+            where += f"entity {entity!r}"
+        if field is not None:
+            where += f"{', ' if where else ''}field {field!r}"
+        super().__init__(f"{where}: {message}" if where else message)
+        self.entity = entity
+        self.field = field
+        self.detail = message
+
+
+class BackendUnavailable(AberrantError, RuntimeError):
+    """A tracer backend cannot run here; the message says why and what to install."""

@@ -1,0 +1,230 @@
+"""GPU data layouts, declared once.
+
+Every table the tracers read is a NumPy structured dtype whose bytes go
+unchanged into a std430 shader storage buffer and an OpenCL buffer. The
+kernels declare the same records in ``backends/kernels/layout.h`` built from
+4-component vectors only (``real4`` / ``int4``), which is the subset on which
+std430 and OpenCL C agree. Tests assert offsets and sizes against the std430
+rules, so a drift between host and kernel is caught on the host.
+
+Two families exist:
+
+* precision-independent tables (``triangles``, ``triangle_uvs``,
+  ``bvh_nodes``, ``materials``, ``settings``): always 32-bit. Vertices are
+  float32 in the assets, so a float64 tracer loses nothing by reading them as
+  float32; BVH bounds are rounded outward so any precision may traverse them.
+* real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
+  their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
+  is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
+  for f64), as std430 and OpenCL C both do.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+Precision = Literal["f32", "f64"]
+PRECISIONS: tuple[Precision, ...] = ("f32", "f64")
+
+# (field name, kind, rows): kind is "real4", "int4" or "float4" (always
+# 32-bit); rows > 1 makes a matrix of that many 4-vector rows.
+FieldSpec = tuple[str, str, int]
+
+
+def _build(fields: list[FieldSpec], precision: Precision) -> np.dtype:
+    """A dtype of 4-vectors with std430 offsets, padded to its alignment."""
+    real = np.float64 if precision == "f64" else np.float32
+    names: list[str] = []
+    formats: list[object] = []
+    offsets: list[int] = []
+    offset = 0
+    align = 16
+    for name, kind, rows in fields:
+        if kind == "real4":
+            base = np.dtype(real)
+        elif kind == "float4":
+            base = np.dtype(np.float32)
+        elif kind == "int4":
+            base = np.dtype(np.int32)
+        else:  # pragma: no cover - a programming error in this file
+            raise ValueError(f"unknown field kind {kind!r}")
+        size = 4 * base.itemsize
+        align = max(align, size)
+        offset = -(-offset // size) * size
+        names.append(name)
+        formats.append((base, (rows, 4) if rows > 1 else (4,)))
+        offsets.append(offset)
+        offset += size * rows
+    itemsize = -(-offset // align) * align
+    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
+
+
+# --- 32-bit tables -----------------------------------------------------------
+
+#: One triangle of a mesh asset, object space. ``w`` components are unused.
+TRIANGLE_DTYPE = _build([("v0", "float4", 1), ("v1", "float4", 1), ("v2", "float4", 1)], "f32")
+
+#: Texture coordinates of a triangle: ``uv01 = (u0, v0, u1, v1)``, ``uv2 = (u2, v2, 0, 0)``.
+TRIANGLE_UV_DTYPE = _build([("uv01", "float4", 1), ("uv2", "float4", 1)], "f32")
+
+#: A BVH node, 32 bytes, read by kernels as two 4-vectors whose ``w`` holds an
+#: int32 bit pattern: ``bounds_min.xyz`` + ``first``, ``bounds_max.xyz`` +
+#: ``count``. ``count > 0``: a leaf over triangles ``[first, first + count)``;
+#: ``count == 0``: an interior node whose children are ``first`` and
+#: ``first + 1``. Bounds are rounded outward to float32. Indices are absolute in
+#: the packed scene (the packer adds each asset's offsets).
+BVH_NODE_DTYPE = np.dtype(
+    {
+        "names": ["bounds_min", "first", "bounds_max", "count"],
+        "formats": [(np.float32, (3,)), np.int32, (np.float32, (3,)), np.int32],
+        "offsets": [0, 12, 16, 28],
+        "itemsize": 32,
+    }
+)
+
+#: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
+#: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
+MATERIAL_DTYPE = _build([("color", "float4", 1), ("flags", "int4", 1)], "f32")
+
+#: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
+#: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
+#: aberrations, portals, max_events)``.
+SETTINGS_DTYPE = _build(
+    [
+        ("background", "float4", 1),
+        ("light_dir", "float4", 1),
+        ("event_limit_color", "float4", 1),
+        ("shading", "float4", 1),
+        ("counts", "int4", 1),
+    ],
+    "f32",
+)
+
+
+# --- real tables (float32 or float64) ----------------------------------------
+
+
+def instance_dtype(precision: Precision) -> np.dtype:
+    """A mesh entity placed in the scene.
+
+    ``world_to_object`` rows (3x4 affine, camera-relative world to object
+    space), world-space bounds (camera-relative; ``w`` unused) and
+    ``meta = (bvh_root, material, entity, flags)`` with flags bit 0: the asset
+    has UVs.
+    """
+    return _build(
+        [
+            ("world_to_object", "real4", 3),
+            ("bounds_min", "real4", 1),
+            ("bounds_max", "real4", 1),
+            ("meta", "int4", 1),
+        ],
+        precision,
+    )
+
+
+def aberration_dtype(precision: Precision) -> np.dtype:
+    """An aberration box.
+
+    ``world_to_local`` rows map camera-relative world points into the unit box
+    [-1/2, 1/2]^3; ``rotation`` rows are the box's rotation R (``w`` unused);
+    ``deformation.xyz`` is D; ``meta = (mode, exit, priority, entity)``.
+    Rows are sorted by (priority, entity): the active box at a point is the
+    *last* row that contains it.
+    """
+    return _build(
+        [
+            ("world_to_local", "real4", 3),
+            ("rotation", "real4", 3),
+            ("deformation", "real4", 1),
+            ("meta", "int4", 1),
+        ],
+        precision,
+    )
+
+
+def portal_dtype(precision: Precision) -> np.dtype:
+    """A portal quad.
+
+    ``world_to_local`` rows map camera-relative world points into the quad's
+    space ([-1, 1]^2 at z = 0); ``transfer`` rows are ``X = M_target M_self^-1``
+    in camera-relative coordinates (its 3x3 part is the direction map L);
+    ``meta = (target_row, entity, 0, 0)``, target_row -1 when unlinked.
+    """
+    return _build(
+        [
+            ("world_to_local", "real4", 3),
+            ("transfer", "real4", 3),
+            ("meta", "int4", 1),
+        ],
+        precision,
+    )
+
+
+def camera_dtype(precision: Precision) -> np.dtype:
+    """Per-frame camera.
+
+    ``position.xyz`` is camera-relative (the packed origin subtracted);
+    ``right``, ``up``, ``back`` are the columns of R_cam; ``origin.xyz`` is the
+    packed origin (for world-space checkers); ``sigma_min``/``sigma_max`` are
+    the radial mode's corner-ray bounds m_k, M_k; ``lens = (tan(fov/2),
+    aspect, 0, 0)``; ``size = (width, height, 0, 0)``.
+    """
+    return _build(
+        [
+            ("position", "real4", 1),
+            ("right", "real4", 1),
+            ("up", "real4", 1),
+            ("back", "real4", 1),
+            ("origin", "real4", 1),
+            ("sigma_min", "real4", 1),
+            ("sigma_max", "real4", 1),
+            ("lens", "real4", 1),
+            ("size", "int4", 1),
+        ],
+        precision,
+    )
+
+
+# Mode and exit codes shared by the packer and every kernel.
+ABERRATION_MODES: dict[str, int] = {"metric": 0, "radial": 1, "additive": 2}
+ABERRATION_EXITS: dict[str, int] = {"restore": 0, "repeat": 1, "invert": 2}
+
+INSTANCE_FLAG_HAS_UVS = 1
+
+#: Names of the packed tables, in the binding order every backend uses.
+TABLES: tuple[str, ...] = (
+    "settings",
+    "triangles",
+    "triangle_uvs",
+    "bvh_nodes",
+    "instances",
+    "materials",
+    "aberrations",
+    "portals",
+)
+
+
+def table_dtype(name: str, precision: Precision) -> np.dtype:
+    """The dtype of a named table at a precision (32-bit tables ignore it)."""
+    fixed = {
+        "settings": SETTINGS_DTYPE,
+        "triangles": TRIANGLE_DTYPE,
+        "triangle_uvs": TRIANGLE_UV_DTYPE,
+        "bvh_nodes": BVH_NODE_DTYPE,
+        "materials": MATERIAL_DTYPE,
+    }
+    if name in fixed:
+        return fixed[name]
+    real = {
+        "instances": instance_dtype,
+        "aberrations": aberration_dtype,
+        "portals": portal_dtype,
+        "camera": camera_dtype,
+    }
+    try:
+        return real[name](precision)
+    except KeyError:
+        raise KeyError(f"unknown table {name!r}; tables are {', '.join(TABLES)} and camera") from None

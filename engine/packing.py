@@ -1,0 +1,514 @@
+"""Packing the ECS into the flat tables every tracer reads (layouts in :mod:`engine.layout`).
+
+The packer is incremental: it follows the scene's change journal and
+re-packs a table row when one entity changes, the whole table only when the
+scene's structure (entities, components, assets) changes. Each sync returns
+the :class:`TableUpdate` list a backend needs to upload: a static tick
+returns nothing.
+
+Float32 backends trace in camera-relative coordinates (DESIGN.md section 3):
+the packer subtracts a float64 *origin* near the camera from every world
+transform. The origin snaps to a grid of ``origin_cell`` units and moves only
+when the camera leaves its cell, so walking does not re-upload every
+transform each frame, yet coordinates stay within a cell of the camera, where
+float32 is fine-grained (1e-6 at 16 units).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from components import Aberration, Camera, Mesh, Portal, Transform
+from engine import layout
+from engine.bvh import BvhParams, cached_bvh
+from engine.layout import Precision
+from engine.maths import normalize, quat_to_matrix
+from engine.scene import SETTINGS, Scene
+
+
+@dataclass(frozen=True)
+class Features:
+    """What the scene contains: picks the kernel variant (compile-time defines)."""
+
+    portals: bool = False
+    aberration_modes: frozenset[str] = frozenset()
+    max_events: int = 16
+
+    def defines(self) -> dict[str, int]:
+        return {
+            "HAS_PORTALS": int(self.portals),
+            "HAS_ABERRATIONS": int(bool(self.aberration_modes)),
+            "HAS_METRIC": int("metric" in self.aberration_modes),
+            "HAS_RADIAL": int("radial" in self.aberration_modes),
+            "HAS_ADDITIVE": int("additive" in self.aberration_modes),
+            "MAX_EVENTS": self.max_events,
+        }
+
+
+@dataclass(frozen=True)
+class TableUpdate:
+    """Rows of a table to upload; ``rows is None`` means the whole table (reallocate)."""
+
+    table: str
+    rows: range | None = None
+
+
+@dataclass
+class PackedScene:
+    """The tables, their live row counts (tables never have zero rows), origin and features."""
+
+    precision: Precision
+    origin: np.ndarray
+    tables: dict[str, np.ndarray]
+    counts: dict[str, int]
+    features: Features
+    #: Entity id of each instance row (to map the ``instance`` AOV back, and for tests).
+    instance_entities: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    #: Per-table version, bumped on every update of the table.
+    versions: dict[str, int] = field(default_factory=dict)
+
+    def update_bytes(self, updates: list[TableUpdate]) -> int:
+        """Bytes an upload of ``updates`` transfers."""
+        total = 0
+        for u in updates:
+            table = self.tables[u.table]
+            total += table.nbytes if u.rows is None else len(u.rows) * table.dtype.itemsize
+        return total
+
+
+# --- camera ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CameraView:
+    """The float64 camera a frame is rendered from."""
+
+    position: np.ndarray  # (3,)
+    rotation: np.ndarray  # (3, 3): columns are right, up, back
+    fov_deg: float
+
+    @staticmethod
+    def from_components(transform: Transform, camera: Camera) -> CameraView:
+        return CameraView(
+            np.array(transform.position, dtype=np.float64), quat_to_matrix(transform.rotation), camera.fov_deg
+        )
+
+    def corner_directions(self, aspect: float) -> np.ndarray:
+        """World directions of the rays through NDC (-1, -1) and (+1, +1) (rows)."""
+        t = math.tan(math.radians(self.fov_deg) / 2.0)
+        local = np.array([[-aspect * t, -t, -1.0], [aspect * t, t, -1.0]])
+        local /= np.linalg.norm(local, axis=1, keepdims=True)
+        return local @ self.rotation.T
+
+    def sigma_bounds(self, aspect: float) -> tuple[np.ndarray, np.ndarray]:
+        """The radial mode's ``m_k`` and ``M_k`` (DESIGN.md section 6)."""
+        corners = self.corner_directions(aspect)
+        return corners.min(axis=0), corners.max(axis=0)
+
+    def primary_directions(self, width: int, height: int) -> np.ndarray:
+        """Unit world directions (H, W, 3), float64, exactly per DESIGN.md section 3."""
+        aspect = width / height
+        t = math.tan(math.radians(self.fov_deg) / 2.0)
+        x = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * aspect * t
+        y = (1.0 - 2.0 * (np.arange(height) + 0.5) / height) * t
+        local = np.empty((height, width, 3))
+        local[..., 0] = x[None, :]
+        local[..., 1] = y[:, None]
+        local[..., 2] = -1.0
+        local /= np.linalg.norm(local, axis=2, keepdims=True)
+        return local @ self.rotation.T
+
+
+def scene_camera(scene: Scene) -> CameraView:
+    """The scene's active camera."""
+    if scene.camera_entity is None:
+        scene.validate()  # raises the "no camera" error
+    assert scene.camera_entity is not None
+    return CameraView.from_components(scene.get(scene.camera_entity, Transform), scene.get(scene.camera_entity, Camera))
+
+
+def pack_camera(view: CameraView, origin: np.ndarray, precision: Precision, width: int, height: int) -> np.ndarray:
+    """One row of the camera table, relative to the packed origin."""
+    row = np.zeros(1, dtype=layout.camera_dtype(precision))
+    aspect = width / height
+    row["position"][0, :3] = view.position - origin
+    row["right"][0, :3] = view.rotation[:, 0]
+    row["up"][0, :3] = view.rotation[:, 1]
+    row["back"][0, :3] = view.rotation[:, 2]
+    row["origin"][0, :3] = origin
+    lo, hi = view.sigma_bounds(aspect)
+    row["sigma_min"][0, :3] = lo
+    row["sigma_max"][0, :3] = hi
+    row["lens"][0, :2] = (math.tan(math.radians(view.fov_deg) / 2.0), aspect)
+    row["size"][0, :2] = (width, height)
+    return row
+
+
+# --- batched transforms ----------------------------------------------------------
+
+
+def _rotation_batch(q: np.ndarray) -> np.ndarray:
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    x, y, z, w = q.T
+    r = np.empty((len(q), 3, 3))
+    r[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1)
+    r[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1)
+    r[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)
+    return r
+
+
+def _transforms(transforms: list[Transform], origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Relative positions (n, 3), rotations (n, 3, 3), scales (n, 3)."""
+    p = np.array([t.position for t in transforms], dtype=np.float64).reshape(-1, 3) - origin
+    r = _rotation_batch(np.array([t.rotation for t in transforms], dtype=np.float64).reshape(-1, 4))
+    s = np.array([t.scale for t in transforms], dtype=np.float64).reshape(-1, 3)
+    return p, r, s
+
+
+def _forward(p: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Batched ``T R S`` as (n, 3, 4)."""
+    m = np.empty((len(p), 3, 4))
+    m[:, :, :3] = r * s[:, None, :]
+    m[:, :, 3] = p
+    return m
+
+
+def _inverse(p: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Batched ``(T R S)^-1 = S^-1 R^T T^-1`` as (n, 3, 4)."""
+    m = np.empty((len(p), 3, 4))
+    m[:, :, :3] = np.transpose(r, (0, 2, 1)) / s[:, :, None]
+    m[:, :, 3] = -np.einsum("nij,nj->ni", m[:, :, :3], p)
+    return m
+
+
+def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched affine product ``a @ b`` of (n, 3, 4) matrices."""
+    m = np.empty_like(a)
+    m[:, :, :3] = a[:, :, :3] @ b[:, :, :3]
+    m[:, :, 3] = np.einsum("nij,nj->ni", a[:, :, :3], b[:, :, 3]) + a[:, :, 3]
+    return m
+
+
+def _round_out(lo: np.ndarray, hi: np.ndarray, precision: Precision) -> tuple[np.ndarray, np.ndarray]:
+    if precision == "f64":
+        return lo, hi
+    lo32 = np.nextafter(lo.astype(np.float32), np.float32(-np.inf))
+    hi32 = np.nextafter(hi.astype(np.float32), np.float32(np.inf))
+    return lo32, hi32
+
+
+def _changed_ranges(old: np.ndarray, new: np.ndarray) -> list[range]:
+    """Contiguous row ranges whose bytes differ."""
+    a = old.view(np.uint8).reshape(len(old), -1)
+    b = new.view(np.uint8).reshape(len(new), -1)
+    rows = np.flatnonzero(np.any(a != b, axis=1))
+    if rows.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(rows) > 1)
+    starts = np.concatenate([[rows[0]], rows[breaks + 1]])
+    ends = np.concatenate([rows[breaks], [rows[-1]]]) + 1
+    return [range(int(s), int(e)) for s, e in zip(starts, ends, strict=True)]
+
+
+def _at_least_one_row(table: np.ndarray) -> np.ndarray:
+    return table if len(table) else np.zeros(1, dtype=table.dtype)
+
+
+# --- the packer ------------------------------------------------------------------------
+
+
+class ScenePacker:
+    """Keeps a :class:`PackedScene` in step with a :class:`Scene`, one journal cursor at a time."""
+
+    def __init__(
+        self,
+        precision: Precision = "f32",
+        camera_relative: bool = True,
+        origin_cell: float = 16.0,
+        bvh_params: BvhParams | None = None,
+    ) -> None:
+        self.precision: Precision = precision
+        self.camera_relative = camera_relative
+        self.origin_cell = origin_cell
+        self.bvh_params = bvh_params or BvhParams()
+        self.packed: PackedScene | None = None
+        self._cursor = -1
+        self._scene_world: str | None = None
+        self._instance_row: dict[int, int] = {}
+        self._asset_roots: dict[str, int] = {}
+
+    # origin ---------------------------------------------------------------------------
+
+    def _choose_origin(self, camera_position: np.ndarray, current: np.ndarray | None) -> np.ndarray:
+        if not self.camera_relative:
+            return np.zeros(3)
+        if current is not None and np.max(np.abs(camera_position - current)) <= self.origin_cell:
+            return current
+        return np.round(camera_position / self.origin_cell) * self.origin_cell
+
+    # sync ---------------------------------------------------------------------------------
+
+    def sync(self, scene: Scene, camera_position: np.ndarray | None = None) -> list[TableUpdate]:
+        """Bring the packed tables up to date; returns what changed (empty when nothing did)."""
+        if camera_position is None:
+            camera_position = scene_camera(scene).position
+        camera_position = np.asarray(camera_position, dtype=np.float64)
+        changes = None if self._scene_world != scene.world else scene.changes_since(self._cursor)
+        packed = self.packed
+        if packed is None or changes is None or any(c.kind in ("structure", "assets") for c in changes):
+            self._full(scene, self._choose_origin(camera_position, None if packed is None else packed.origin))
+            self._cursor = scene.cursor
+            self._scene_world = scene.world
+            assert self.packed is not None
+            return [TableUpdate(name) for name in layout.TABLES]
+        self._cursor = scene.cursor
+        updates: list[TableUpdate] = []
+        origin = self._choose_origin(camera_position, packed.origin)
+        if not np.array_equal(origin, packed.origin):
+            packed.origin = origin
+            self._pack_instances(scene)
+            updates.append(TableUpdate("instances"))
+            changes = [c for c in changes if c.kind not in ("transform",)]
+            changed_real = {"aberrations", "portals"}
+        else:
+            changed_real = set()
+        instance_rows: set[int] = set()
+        material_rows: set[int] = set()
+        for change in changes:
+            if change.kind == SETTINGS:
+                self._pack_settings(scene)
+                updates.append(TableUpdate("settings"))
+            elif change.kind in ("transform", "mesh") and change.entity in self._instance_row:
+                mesh = scene.get(change.entity, Mesh)
+                if scene.asset(mesh.asset).content_hash not in self._asset_roots:
+                    return self._resync(scene, camera_position)
+                instance_rows.add(self._instance_row[change.entity])
+                if change.kind == "mesh":
+                    material_rows.add(self._instance_row[change.entity])
+            if change.kind in ("transform", "aberration") and scene.has(change.entity, Aberration):
+                changed_real.add("aberrations")
+            if change.kind in ("transform", "portal", "name") and scene.has(change.entity, Portal):
+                changed_real.add("portals")
+        for row in sorted(instance_rows):
+            self._pack_instance_rows(scene, [row])
+            updates.append(TableUpdate("instances", range(row, row + 1)))
+        for row in sorted(material_rows):
+            self._pack_material_row(scene, row)
+            updates.append(TableUpdate("materials", range(row, row + 1)))
+        for table in sorted(changed_real):
+            old = packed.tables[table]
+            (self._pack_aberrations if table == "aberrations" else self._pack_portals)(scene)
+            new = packed.tables[table]
+            if any(u.table == table and u.rows is None for u in updates):
+                continue
+            if len(old) != len(new):
+                updates.append(TableUpdate(table))
+            else:
+                updates.extend(TableUpdate(table, r) for r in _changed_ranges(old, new))
+        if any(t in changed_real for t in ("aberrations", "portals")):
+            self._update_features_and_counts(scene)
+            updates.append(TableUpdate("settings"))
+        updates = _merge(updates)
+        for u in updates:
+            packed.versions[u.table] = packed.versions.get(u.table, 0) + 1
+        return updates
+
+    def _resync(self, scene: Scene, camera_position: np.ndarray) -> list[TableUpdate]:
+        self.packed = None
+        return self.sync(scene, camera_position)
+
+    # full packing --------------------------------------------------------------------
+
+    def _full(self, scene: Scene, origin: np.ndarray) -> None:
+        scene.validate()
+        old_versions = self.packed.versions if self.packed is not None else {}
+        meshes = scene.query(Transform, Mesh)
+        self._instance_row = {entity: row for row, (entity, _) in enumerate(meshes)}
+        tris, uvs, nodes = [], [], []
+        self._asset_roots = {}
+        self._asset_flags: dict[str, int] = {}
+        node_base = tri_base = 0
+        for _, (_, mesh) in meshes:
+            asset = scene.asset(mesh.asset)
+            if asset.content_hash in self._asset_roots:
+                continue
+            bvh = cached_bvh(asset.vertices, asset.faces, self.bvh_params)
+            faces = asset.faces[bvh.triangle_order]
+            t = np.zeros(len(faces), dtype=layout.TRIANGLE_DTYPE)
+            for k, name in enumerate(("v0", "v1", "v2")):
+                t[name][:, :3] = asset.vertices[faces[:, k]]
+            u = np.zeros(len(faces), dtype=layout.TRIANGLE_UV_DTYPE)
+            if asset.uvs is not None:
+                u["uv01"][:, :2] = asset.uvs[faces[:, 0]]
+                u["uv01"][:, 2:] = asset.uvs[faces[:, 1]]
+                u["uv2"][:, :2] = asset.uvs[faces[:, 2]]
+            n = bvh.nodes.copy()
+            n["first"] += np.where(n["count"] > 0, tri_base, node_base)
+            self._asset_roots[asset.content_hash] = node_base
+            self._asset_flags[asset.content_hash] = layout.INSTANCE_FLAG_HAS_UVS if asset.uvs is not None else 0
+            tris.append(t)
+            uvs.append(u)
+            nodes.append(n)
+            node_base += len(n)
+            tri_base += len(t)
+        tables = {
+            "triangles": np.concatenate(tris) if tris else np.zeros(0, layout.TRIANGLE_DTYPE),
+            "triangle_uvs": np.concatenate(uvs) if uvs else np.zeros(0, layout.TRIANGLE_UV_DTYPE),
+            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, layout.BVH_NODE_DTYPE),
+        }
+        counts = {name: len(t) for name, t in tables.items()}
+        tables = {name: _at_least_one_row(t) for name, t in tables.items()}
+        self.packed = PackedScene(
+            self.precision, origin, tables, counts, Features(), np.array([e for e, _ in meshes], dtype=np.int32),
+            versions={name: old_versions.get(name, 0) + 1 for name in layout.TABLES},
+        )  # fmt: skip
+        self._pack_instances(scene)
+        self._pack_materials(scene)
+        self._pack_aberrations(scene)
+        self._pack_portals(scene)
+        self._update_features_and_counts(scene)
+
+    def _pack_settings(self, scene: Scene) -> None:
+        assert self.packed is not None
+        s = scene.settings
+        row = np.zeros(1, dtype=layout.SETTINGS_DTYPE)
+        row["background"][0, :3] = s.background
+        row["background"][0, 3] = 1.0
+        row["light_dir"][0, :3] = normalize(s.light_dir)
+        row["event_limit_color"][0, :3] = s.event_limit_color
+        row["event_limit_color"][0, 3] = 1.0
+        row["shading"][0, 0] = s.ambient
+        c = self.packed.counts
+        row["counts"][0] = (c["instances"], c["aberrations"], c["portals"], s.max_events)
+        self.packed.tables["settings"] = row
+        self.packed.counts["settings"] = 1
+        self.packed.features = Features(
+            self.packed.features.portals, self.packed.features.aberration_modes, s.max_events
+        )
+
+    def _update_features_and_counts(self, scene: Scene) -> None:
+        assert self.packed is not None
+        modes = frozenset(a.mode for _, a in scene.query(Aberration))
+        portals = any(p.target is not None for _, p in scene.query(Portal))
+        self.packed.features = Features(portals, modes, scene.settings.max_events)
+        self._pack_settings(scene)
+
+    def _pack_instances(self, scene: Scene) -> None:
+        assert self.packed is not None
+        n = len(self._instance_row)
+        self.packed.counts["instances"] = n
+        self.packed.tables["instances"] = np.zeros(max(n, 1), dtype=layout.instance_dtype(self.precision))
+        if n:
+            self._pack_instance_rows(scene, list(range(n)))
+
+    def _pack_instance_rows(self, scene: Scene, rows: list[int]) -> None:
+        packed = self.packed
+        assert packed is not None
+        entities = [int(packed.instance_entities[r]) for r in rows]
+        transforms = [scene.get(e, Transform) for e in entities]
+        meshes = [scene.get(e, Mesh) for e in entities]
+        p, r, s = _transforms(transforms, packed.origin)
+        forward = _forward(p, r, s)
+        table = packed.tables["instances"]
+        table["world_to_object"][rows, :, :] = _inverse(p, r, s)
+        for i, (row, entity, mesh) in enumerate(zip(rows, entities, meshes, strict=True)):
+            asset = scene.asset(mesh.asset)
+            lo, hi = asset.bounds()
+            corners = np.array(
+                [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], dtype=np.float64
+            )
+            world = corners @ forward[i, :, :3].T + forward[i, :, 3]
+            bmin, bmax = _round_out(world.min(axis=0), world.max(axis=0), self.precision)
+            table["bounds_min"][row, :3] = bmin
+            table["bounds_max"][row, :3] = bmax
+            table["meta"][row] = (
+                self._asset_roots[asset.content_hash],
+                row,
+                entity,
+                self._asset_flags[asset.content_hash],
+            )
+
+    def _pack_materials(self, scene: Scene) -> None:
+        assert self.packed is not None
+        n = len(self._instance_row)
+        self.packed.counts["materials"] = n
+        self.packed.tables["materials"] = np.zeros(max(n, 1), dtype=layout.MATERIAL_DTYPE)
+        for row in range(n):
+            self._pack_material_row(scene, row)
+
+    def _pack_material_row(self, scene: Scene, row: int) -> None:
+        assert self.packed is not None
+        mesh = scene.get(int(self.packed.instance_entities[row]), Mesh)
+        table = self.packed.tables["materials"]
+        table["color"][row] = (*mesh.color, mesh.checker)
+        table["flags"][row] = (int(mesh.cull_backfaces), 0, 0, 0)
+
+    def _pack_aberrations(self, scene: Scene) -> None:
+        packed = self.packed
+        assert packed is not None
+        rows = sorted(scene.query(Transform, Aberration), key=lambda row: (row[1][1].priority, row[0]))
+        table = np.zeros(max(len(rows), 1), dtype=layout.aberration_dtype(self.precision))
+        packed.counts["aberrations"] = len(rows)
+        if rows:
+            p, r, s = _transforms([t for _, (t, _) in rows], packed.origin)
+            table["world_to_local"][: len(rows)] = _inverse(p, r, s)
+            table["rotation"][: len(rows), :, :3] = r
+            for i, (entity, (_, ab)) in enumerate(rows):
+                table["deformation"][i, :3] = ab.deformation
+                table["meta"][i] = (
+                    layout.ABERRATION_MODES[ab.mode],
+                    layout.ABERRATION_EXITS[ab.exit],
+                    ab.priority,
+                    entity,
+                )
+        packed.tables["aberrations"] = table
+
+    def _pack_portals(self, scene: Scene) -> None:
+        packed = self.packed
+        assert packed is not None
+        rows = scene.query(Transform, Portal)
+        row_of = {entity: i for i, (entity, _) in enumerate(rows)}
+        table = np.zeros(max(len(rows), 1), dtype=layout.portal_dtype(self.precision))
+        packed.counts["portals"] = len(rows)
+        if rows:
+            p, r, s = _transforms([t for _, (t, _) in rows], packed.origin)
+            forward, inverse = _forward(p, r, s), _inverse(p, r, s)
+            table["world_to_local"][: len(rows)] = inverse
+            targets = np.array(
+                [-1 if portal.target is None else row_of[scene.entity(portal.target)] for _, (_, portal) in rows]
+            )
+            linked = np.flatnonzero(targets >= 0)
+            identity = np.zeros((len(rows), 3, 4))
+            identity[:, :, :3] = np.eye(3)
+            transfer = identity
+            if linked.size:
+                transfer[linked] = _compose(forward[targets[linked]], inverse[linked])
+            table["transfer"][: len(rows)] = transfer
+            for i, (entity, _) in enumerate(rows):
+                table["meta"][i] = (targets[i], entity, 0, 0)
+        packed.tables["portals"] = table
+
+
+def _merge(updates: list[TableUpdate]) -> list[TableUpdate]:
+    """One update per table: whole-table updates absorb row updates; adjacent rows coalesce."""
+    by_table: dict[str, list[TableUpdate]] = {}
+    for u in updates:
+        by_table.setdefault(u.table, []).append(u)
+    merged: list[TableUpdate] = []
+    for table, items in by_table.items():
+        if any(u.rows is None for u in items):
+            merged.append(TableUpdate(table))
+            continue
+        spans = sorted((u.rows.start, u.rows.stop) for u in items if u.rows is not None)
+        start, stop = spans[0]
+        for s, e in spans[1:]:
+            if s <= stop:
+                stop = max(stop, e)
+            else:
+                merged.append(TableUpdate(table, range(start, stop)))
+                start, stop = s, e
+        merged.append(TableUpdate(table, range(start, stop)))
+    return merged

@@ -1,0 +1,42 @@
+"""Shared fixtures: backends honour ABERRANT_REQUIRE_BACKENDS (fail, not skip, when required)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from backends.base import backend_class, probe, required_backends
+
+os.environ.setdefault("ABERRANT_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "aberrant"))
+
+
+def require_backend(name: str) -> None:
+    """Skip (with the probed reason) when ``name`` cannot run here, or fail when CI requires it."""
+    reason = probe(name)
+    if reason is None:
+        return
+    if name in required_backends():
+        pytest.fail(f"{name} backend is required (ABERRANT_REQUIRE_BACKENDS) but cannot run: {reason}")
+    pytest.skip(f"{name} backend cannot run here: {reason}")
+
+
+_live: dict[tuple[str, str], object] = {}
+
+
+@pytest.fixture(scope="session")
+def backend_factory():
+    """``make(name, precision=None)``: one live backend per (name, precision) for the whole session."""
+
+    def make(name: str, precision: str | None = None):
+        require_backend(name)
+        key = (name, precision or "")
+        if key not in _live:
+            _live[key] = backend_class(name)(precision=precision)
+        return _live[key]
+
+    yield make
+    for backend in _live.values():
+        backend.release()  # type: ignore[attr-defined]
+    _live.clear()

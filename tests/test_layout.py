@@ -1,0 +1,93 @@
+"""The packed layouts obey std430 (and OpenCL C) rules: asserted independently of engine.layout."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine import layout
+
+# Expected (offset, size) per field, written out by hand from the std430 rules:
+# a vec4 of 4-byte scalars aligns to 16, a dvec4 to 32; a struct's size rounds
+# up to its largest member alignment.
+EXPECTED = {
+    ("settings", "f32"): ({"background": 0, "light_dir": 16, "event_limit_color": 32, "shading": 48, "counts": 64}, 80),
+    ("triangles", "f32"): ({"v0": 0, "v1": 16, "v2": 32}, 48),
+    ("triangle_uvs", "f32"): ({"uv01": 0, "uv2": 16}, 32),
+    ("bvh_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
+    ("materials", "f32"): ({"color": 0, "flags": 16}, 32),
+    ("instances", "f32"): ({"world_to_object": 0, "bounds_min": 48, "bounds_max": 64, "meta": 80}, 96),
+    ("instances", "f64"): ({"world_to_object": 0, "bounds_min": 96, "bounds_max": 128, "meta": 160}, 192),
+    ("aberrations", "f32"): ({"world_to_local": 0, "rotation": 48, "deformation": 96, "meta": 112}, 128),
+    ("aberrations", "f64"): ({"world_to_local": 0, "rotation": 96, "deformation": 192, "meta": 224}, 256),
+    ("portals", "f32"): ({"world_to_local": 0, "transfer": 48, "meta": 96}, 112),
+    ("portals", "f64"): ({"world_to_local": 0, "transfer": 96, "meta": 192}, 224),
+    ("camera", "f32"): (
+        {
+            "position": 0,
+            "right": 16,
+            "up": 32,
+            "back": 48,
+            "origin": 64,
+            "sigma_min": 80,
+            "sigma_max": 96,
+            "lens": 112,
+            "size": 128,
+        },
+        144,
+    ),
+    ("camera", "f64"): (
+        {
+            "position": 0,
+            "right": 32,
+            "up": 64,
+            "back": 96,
+            "origin": 128,
+            "sigma_min": 160,
+            "sigma_max": 192,
+            "lens": 224,
+            "size": 256,
+        },
+        288,
+    ),
+}
+
+
+@pytest.mark.parametrize(("table", "precision"), sorted(EXPECTED))
+def test_offsets_and_sizes(table: str, precision: str) -> None:
+    offsets, itemsize = EXPECTED[(table, precision)]
+    dtype = layout.table_dtype(table, precision)  # type: ignore[arg-type]
+    assert dtype.itemsize == itemsize
+    assert {name: dtype.fields[name][1] for name in dtype.names} == offsets
+
+
+@pytest.mark.parametrize("table", [*layout.TABLES, "camera"])
+@pytest.mark.parametrize("precision", layout.PRECISIONS)
+def test_records_are_whole_vectors(table: str, precision: str) -> None:
+    """Every record is a multiple of its vector alignment, so arrays of them need no padding."""
+    dtype = layout.table_dtype(table, precision)
+    assert (
+        dtype.itemsize
+        % (32 if precision == "f64" and table in ("instances", "aberrations", "portals", "camera") else 16)
+        == 0
+    )
+    for name in dtype.names:
+        base = dtype.fields[name][0].base
+        assert base in (np.dtype(np.float32), np.dtype(np.float64), np.dtype(np.int32))
+
+
+def test_precision_only_changes_real_tables() -> None:
+    for table in ("settings", "triangles", "triangle_uvs", "bvh_nodes", "materials"):
+        assert layout.table_dtype(table, "f32") == layout.table_dtype(table, "f64")
+    for table in ("instances", "aberrations", "portals", "camera"):
+        assert layout.table_dtype(table, "f64").itemsize > layout.table_dtype(table, "f32").itemsize
+
+
+def test_unknown_table_is_named() -> None:
+    with pytest.raises(KeyError, match="unknown table 'nope'"):
+        layout.table_dtype("nope", "f32")
+
+
+def test_codes_are_distinct() -> None:
+    assert sorted(layout.ABERRATION_MODES.values()) == [0, 1, 2]
+    assert sorted(layout.ABERRATION_EXITS.values()) == [0, 1, 2]

@@ -1,0 +1,205 @@
+"""Packing: tables match the scene, and syncs upload only what changed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from components import Aberration, Mesh, Portal, Transform
+from engine.maths import quat_from_euler_deg, trs_matrix
+from engine.packing import CameraView, ScenePacker, TableUpdate, pack_camera
+from engine.scene import Scene
+from engine.settings import Settings
+
+
+def small_scene() -> Scene:
+    scene = Scene("packing")
+    scene.add_mesh("floor", "plane", scale=(10, 1, 10), checker=1.0)
+    scene.add_mesh("box", "box", position=(1, 0.5, -2), euler_deg=(0, 30, 0), color=(1, 0, 0))
+    scene.add_mesh("box2", "box", position=(-1, 0.5, -2), cull_backfaces=True)
+    scene.add_aberration("hi", (1, 0, 0), position=(0, 1, 0), scale=2, priority=5)
+    scene.add_aberration("lo", (0, 1, 0), position=(0, 1, 0), scale=3, priority=1, mode="radial")
+    scene.add_portal_pair("a", "b", a=dict(position=(2, 1, 0)), b=dict(position=(-2, 1, 0), euler_deg=(0, 180, 0)))
+    scene.set_camera((0, 1.5, 5), look_at=(0, 0.5, 0))
+    return scene
+
+
+def test_full_pack_tables_and_counts() -> None:
+    scene = small_scene()
+    packer = ScenePacker("f32")
+    updates = packer.sync(scene)
+    packed = packer.packed
+    assert packed is not None
+    assert {u.table for u in updates} == set(packed.tables) and all(u.rows is None for u in updates)
+    assert packed.counts["instances"] == 3
+    assert packed.counts["aberrations"] == 2
+    assert packed.counts["portals"] == 2
+    # box and box2 share one asset: triangles stored once (plane 2 + box 12).
+    assert packed.counts["triangles"] == 14
+    roots = packed.tables["instances"]["meta"][:3, 0]
+    assert roots[1] == roots[2] != roots[0]
+    assert list(packed.tables["instances"]["meta"][:3, 2]) == [scene.entity(n) for n in ("floor", "box", "box2")]
+    assert packed.tables["materials"]["flags"][2, 0] == 1
+    assert packed.tables["materials"]["color"][0, 3] == 1.0
+    assert packed.features.portals and packed.features.aberration_modes == {"metric", "radial"}
+    assert list(packed.tables["settings"]["counts"][0]) == [3, 2, 2, 16]
+
+
+def test_aberrations_sorted_by_priority_last_wins() -> None:
+    packer = ScenePacker("f64", camera_relative=False)
+    scene = small_scene()
+    packer.sync(scene)
+    meta = packer.packed.tables["aberrations"]["meta"]
+    assert list(meta[:, 2]) == [1, 5]
+    assert list(meta[:, 3]) == [scene.entity("lo"), scene.entity("hi")]
+    assert list(meta[:, 0]) == [1, 0]  # radial, metric
+
+
+def test_instance_transform_is_world_to_object() -> None:
+    scene = small_scene()
+    packer = ScenePacker("f64", camera_relative=False)
+    packer.sync(scene)
+    t = scene.get(scene.entity("box"), Transform)
+    w2o = packer.packed.tables["instances"]["world_to_object"][1]
+    m = trs_matrix(t.position, t.rotation, t.scale)
+    product = w2o[:, :3] @ m[:3, :3]
+    np.testing.assert_allclose(product, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(w2o[:, :3] @ m[:3, 3] + w2o[:, 3], 0, atol=1e-12)
+
+
+def test_camera_relative_origin_snaps_and_keeps_float32_small() -> None:
+    scene = Scene("far")
+    scene.add_mesh("box", "box", position=(1e5 + 1, 0, -3))
+    scene.set_camera((1e5 + 3.0, 0, 0))
+    packer = ScenePacker("f32", origin_cell=16.0)
+    packer.sync(scene)
+    origin = packer.packed.origin
+    assert np.all(np.abs(origin - np.array([1e5 + 3.0, 0, 0])) <= 8.0)
+    w2o = packer.packed.tables["instances"]["world_to_object"][0]
+    assert np.all(np.abs(w2o[:, 3]) < 20)  # translation relative to the origin, not 1e5
+
+
+def test_portal_transfer_maps_self_onto_target() -> None:
+    scene = small_scene()
+    packer = ScenePacker("f64", camera_relative=False)
+    packer.sync(scene)
+    x = packer.packed.tables["portals"]["transfer"][0]
+    a, b = scene.get(scene.entity("a"), Transform), scene.get(scene.entity("b"), Transform)
+    ma, mb = trs_matrix(a.position, a.rotation, a.scale), trs_matrix(b.position, b.rotation, b.scale)
+    corner_a = ma @ np.array([1.0, 1.0, 0.0, 1.0])
+    corner_b = mb @ np.array([1.0, 1.0, 0.0, 1.0])
+    np.testing.assert_allclose(x[:, :3] @ corner_a[:3] + x[:, 3], corner_b[:3], atol=1e-12)
+    assert list(packer.packed.tables["portals"]["meta"][:2, 0]) == [1, 0]
+
+
+def test_static_sync_uploads_nothing() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    assert packer.sync(scene) == []
+
+
+def test_moving_one_mesh_updates_one_row() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    box = scene.entity("box")
+    scene.set(box, Transform((1, 0.7, -2), tuple(quat_from_euler_deg((0, 30, 0))), (1, 1, 1)))
+    updates = packer.sync(scene)
+    assert updates == [TableUpdate("instances", range(1, 2))]
+    assert packer.packed.update_bytes(updates) == packer.packed.tables["instances"].dtype.itemsize
+
+
+def test_recolouring_updates_material_row_only() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    box2 = scene.entity("box2")
+    scene.set(box2, Mesh("box", color=(0, 1, 0), cull_backfaces=True))
+    updates = packer.sync(scene)
+    assert TableUpdate("materials", range(2, 3)) in updates
+    assert all(u.table in ("instances", "materials") and u.rows is not None for u in updates)
+
+
+def test_moving_a_portal_updates_portal_rows_and_the_camera_moving_updates_nothing() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    b = scene.entity("b")
+    old = scene.get(b, Transform)
+    scene.set(b, Transform((-2.5, 1, 0), old.rotation, old.scale))
+    updates = packer.sync(scene)
+    tables = {u.table for u in updates}
+    assert "portals" in tables and "instances" not in tables and "triangles" not in tables
+    cam = scene.camera_entity
+    t = scene.get(cam, Transform)
+    scene.set(cam, Transform((0.5, 1.5, 5), t.rotation, t.scale))  # within the origin cell
+    assert packer.sync(scene) == []
+
+
+def test_structural_change_repacks_everything() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    scene.add_mesh("sphere", "sphere", position=(0, 1, -4))
+    updates = packer.sync(scene)
+    assert all(u.rows is None for u in updates)
+    assert packer.packed.counts["instances"] == 4
+
+
+def test_settings_change_updates_settings() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    scene.settings = Settings(max_events=4)
+    assert packer.sync(scene) == [TableUpdate("settings")]
+    assert packer.packed.features.max_events == 4
+
+
+def test_priority_change_reorders_aberrations() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    lo = scene.entity("lo")
+    scene.set(lo, Aberration((0, 1, 0), mode="radial", priority=9))
+    updates = packer.sync(scene)
+    assert any(u.table == "aberrations" for u in updates)
+    assert packer.packed.tables["aberrations"]["meta"][1, 3] == lo
+
+
+def test_retargeting_a_portal_changes_features() -> None:
+    scene = small_scene()
+    packer = ScenePacker()
+    packer.sync(scene)
+    for name in ("a", "b"):
+        scene.set(scene.entity(name), Portal(None))
+    packer.sync(scene)
+    assert not packer.packed.features.portals
+    assert list(packer.packed.tables["portals"]["meta"][:2, 0]) == [-1, -1]
+
+
+def test_empty_scene_has_one_padding_row_per_table() -> None:
+    scene = Scene("empty")
+    scene.set_camera((0, 0, 0))
+    packer = ScenePacker()
+    packer.sync(scene)
+    for name, table in packer.packed.tables.items():
+        assert len(table) == 1, name
+        assert packer.packed.counts[name] == (1 if name == "settings" else 0)
+
+
+def test_camera_row_and_primary_rays() -> None:
+    view = CameraView(np.array([1.0, 2.0, 3.0]), np.eye(3), 90.0)
+    row = pack_camera(view, np.array([1.0, 2.0, 0.0]), "f32", 4, 2)
+    assert list(row["position"][0, :3]) == [0, 0, 3]
+    assert row["lens"][0, 0] == pytest.approx(1.0)
+    assert row["lens"][0, 1] == pytest.approx(2.0)
+    d = view.primary_directions(4, 2)
+    assert d.shape == (2, 4, 3)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=2), 1.0)
+    # Row 0 is the top: its rays point up.
+    assert np.all(d[0, :, 1] > 0) and np.all(d[1, :, 1] < 0)
+    # Left column points left.
+    assert np.all(d[:, 0, 0] < 0) and np.all(d[:, -1, 0] > 0)
+    lo, hi = view.sigma_bounds(2.0)
+    np.testing.assert_allclose(lo[2], hi[2])  # the view axis of a level camera collapses
