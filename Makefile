@@ -1,0 +1,151 @@
+# aberrant — set-up, demo, tests.
+#
+#   make demo    install what is missing, render the starter demo to out/starter.png
+#   make test    install what is missing, run the test suite
+#
+# Set-up (shared by every target that runs code), each step skipped when done:
+#   1. apt packages (Debian): the Mesa EGL/OpenGL stack for headless moderngl on
+#      llvmpipe, the OpenCL ICD loader, glfw for the editor. Checked with dpkg on
+#      every run (fast); apt-get runs only when something is missing.
+#   2. .venv (python3.11, or python3 if it is 3.11+), pip upgraded, then
+#      `pip install -e '.[dev,glsl,opencl]'`; stamped on pyproject.toml, so
+#      editing pyproject reinstalls and nothing else does.
+
+SHELL := /bin/bash
+.SHELLFLAGS := -euo pipefail -c
+.ONESHELL:
+.DEFAULT_GOAL := help
+.DELETE_ON_ERROR:
+
+# Mesa EGL/GL for moderngl.create_standalone_context(backend="egl"):
+#   libegl1          libEGL.so.1 (glvnd dispatcher)
+#   libegl-mesa0     Mesa's EGL vendor library (surfaceless / device platforms)
+#   libgl1           libGL.so.1, which glcontext's EGL backend also loads for GL symbols
+#   libgl1-mesa-dri  the Mesa drivers, llvmpipe (software rasteriser) among them
+# OpenCL: ocl-icd-libopencl1 (system ICD loader; PoCL itself comes from PyPI, pyopencl[pocl]).
+# Editor: libglfw3.
+APT_PACKAGES := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri ocl-icd-libopencl1 libglfw3
+
+# The interpreter the venv is made from; override with `make BASE_PYTHON=/path/to/python3.x test`.
+BASE_PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3 2>/dev/null)
+VENV := .venv
+PY := $(VENV)/bin/python
+EXTRAS := dev,glsl,opencl
+VENV_OK := $(VENV)/.stamp-venv
+INSTALLED := $(VENV)/.stamp-installed
+
+# Extra arguments for pytest, e.g. `make test PYTEST_ARGS="-k portal -x"`.
+PYTEST_ARGS ?=
+DEMO_OUT := out/starter.png
+
+.PHONY: help setup apt-packages demo test bench lint format clean
+
+help:
+	@echo "aberrant — make targets:"
+	echo "  make demo    install what is missing, render the starter demo to $(DEMO_OUT)"
+	echo "  make test    install what is missing, run the test suite (pytest -q)"
+	echo "  make bench   run the benchmarks (pytest-benchmark)"
+	echo "  make lint    ruff check + ruff format --check"
+	echo "  make format  ruff format + ruff check --fix"
+	echo "  make setup   only install (apt packages, .venv, the package in editable mode)"
+	echo "  make clean   remove .venv and caches"
+
+setup: $(INSTALLED)
+
+# ---------------------------------------------------------------------------
+# 1. apt packages. A phony check that runs every time (a few dpkg calls); it is
+#    an order-only prerequisite below so it never makes the venv look stale.
+apt-packages:
+	@if ! command -v dpkg >/dev/null 2>&1; then
+	  echo "==> warning: no dpkg (not Debian?): make sure these are installed: $(APT_PACKAGES)" >&2
+	  exit 0
+	fi
+	missing=()
+	for p in $(APT_PACKAGES); do
+	  if ! dpkg -s "$$p" 2>/dev/null | grep -q '^Status: install ok installed'; then missing+=("$$p"); fi
+	done
+	# Debian's own python3.x keeps venv's ensurepip in a separate package.
+	if [ ! -e "$(VENV_OK)" ] && pyver=$$("$(BASE_PYTHON)" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null) \
+	    && ! "$(BASE_PYTHON)" -c 'import ensurepip' >/dev/null 2>&1; then
+	  missing+=("python$$pyver-venv")
+	fi
+	[ $${#missing[@]} -eq 0 ] && exit 0
+	cmd="apt-get update && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends $${missing[*]}"
+	if [ "$$(id -u)" -ne 0 ]; then
+	  echo "error: missing apt packages: $${missing[*]}" >&2
+	  echo "       install them as root, then run make again:" >&2
+	  echo "       sudo sh -c '$$cmd'" >&2
+	  exit 1
+	fi
+	echo "==> installing apt packages: $${missing[*]}"
+	apt-get update -q
+	DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "$${missing[@]}"
+
+# ---------------------------------------------------------------------------
+# 2a. The virtual environment. An existing, working .venv (3.11+, with pip) is
+#     kept; a missing or broken one is made afresh.
+$(VENV_OK): | apt-packages
+	@if [ -x "$(PY)" ] && "$(PY)" -c 'import sys; assert sys.version_info >= (3, 11)' >/dev/null 2>&1 \
+	    && "$(PY)" -m pip --version >/dev/null 2>&1; then
+	  touch "$@"; exit 0
+	fi
+	py="$(BASE_PYTHON)"
+	if [ -z "$$py" ]; then
+	  echo "error: no python3.11 or python3 on PATH; install Python 3.11 (Debian 12: apt-get install python3 python3-venv)" >&2
+	  exit 1
+	fi
+	if ! ver=$$("$$py" -c 'import platform; print(platform.python_version())' 2>/dev/null); then
+	  echo "error: cannot run $$py (BASE_PYTHON)" >&2
+	  exit 1
+	fi
+	if ! "$$py" -c 'import sys; sys.exit(sys.version_info < (3, 11))'; then
+	  echo "error: $$py is Python $$ver; aberrant needs 3.11+" >&2
+	  echo "       install python3.11, or run: make BASE_PYTHON=/path/to/python3.11 ..." >&2
+	  exit 1
+	fi
+	echo "==> creating $(VENV) with $$py ($$ver)"
+	rm -rf "$(VENV)"
+	"$$py" -m venv "$(VENV)"
+	touch "$@"
+
+# 2b. pip and the package itself, editable, with all extras.
+$(INSTALLED): pyproject.toml $(VENV_OK)
+	@echo "==> upgrading pip in $(VENV)"
+	"$(PY)" -m pip install -q --upgrade pip
+	echo "==> installing aberrant (editable) with extras [$(EXTRAS)] into $(VENV)"
+	"$(PY)" -m pip install -q -e '.[$(EXTRAS)]'
+	touch "$@"
+
+# ---------------------------------------------------------------------------
+# Targets that use the environment. Order-only prerequisites: the apt check runs
+# every time (it is cheap), the install only when its stamp is stale.
+demo: | apt-packages $(INSTALLED)
+	@mkdir -p "$(dir $(DEMO_OUT))"
+	echo "==> rendering the starter demo"
+	"$(VENV)/bin/aberrant" render starter --backend auto --size 800x600 --out "$(DEMO_OUT)"
+	echo "==> image: $(abspath $(DEMO_OUT))"
+
+test: | apt-packages $(INSTALLED)
+	@"$(PY)" -m pytest -q $(PYTEST_ARGS)
+
+# --benchmark-only overrides the --benchmark-skip in pyproject's addopts;
+# --benchmark-enable overrides a --benchmark-disable should one be added.
+bench: | apt-packages $(INSTALLED)
+	@"$(PY)" -m pytest -q -rfE --benchmark-only --benchmark-enable tests/ $(PYTEST_ARGS)
+
+lint: | apt-packages $(INSTALLED)
+	@status=0
+	echo "==> ruff check"
+	"$(VENV)/bin/ruff" check . || status=1
+	echo "==> ruff format --check"
+	"$(VENV)/bin/ruff" format --check . || status=1
+	exit $$status
+
+format: | apt-packages $(INSTALLED)
+	@"$(VENV)/bin/ruff" format .
+	"$(VENV)/bin/ruff" check --fix .
+
+clean:
+	@echo "==> removing $(VENV), caches and build files"
+	rm -rf "$(VENV)" .pytest_cache .ruff_cache .cache build *.egg-info
+	find . -path ./.git -prune -o -type d -name __pycache__ -print0 | xargs -0 rm -rf

@@ -1,0 +1,1 @@
+"""Data files for the demos (meshes); ``make_knot`` regenerates ``knot.obj``."""
