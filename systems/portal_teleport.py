@@ -1,0 +1,184 @@
+"""Portal teleport: the camera's path this tick, tested against every linked portal quad.
+
+DESIGN.md section 8.2. The test is on the *segment* walked this tick, not on
+the end point, so a fast camera cannot tunnel through a portal; the camera
+arrives on the target quad and the target is skipped for the rest of that
+segment (and a segment that starts on a quad does not cross it), so it never
+oscillates; at most :data:`MAX_CROSSINGS` crossings per tick, so facing
+portals terminate.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import esper
+import numpy as np
+
+from components import Portal, Transform
+from engine.errors import SceneError
+from engine.maths import quat_from_matrix, quat_to_matrix, trs_inverse, trs_matrix
+from engine.scene import Scene
+from systems.state import MotionRecord
+
+#: Portal crossings allowed per tick; after the last one the camera stays where it arrived.
+MAX_CROSSINGS = 4
+#: Relative tolerance (of the coordinate magnitude) for "on the portal's plane".
+PLANE_EPS = 1e-11
+
+
+@dataclass(frozen=True)
+class PortalLink:
+    """A linked portal: its quad and the mapping ``X = M_target · M_self⁻¹`` into its target."""
+
+    entity: int
+    target: int
+    to_local: np.ndarray  # (4, 4): world -> portal local (quad [-1, 1]^2 at z = 0)
+    z_scale: float  # world length of one local z unit (plane tolerance)
+    transfer: np.ndarray  # (4, 4): X
+    rotation: np.ndarray  # (3, 3): rotation part of X's linear part L
+
+    def local(self, point: np.ndarray) -> np.ndarray:
+        return self.to_local[:3, :3] @ point + self.to_local[:3, 3]
+
+    def map_point(self, point: np.ndarray) -> np.ndarray:
+        return self.transfer[:3, :3] @ point + self.transfer[:3, 3]
+
+
+def rotation_part(linear: np.ndarray) -> np.ndarray:
+    """The rotation nearest ``linear`` (polar decomposition by SVD; a reflection's sign is dropped)."""
+    u, _, vt = np.linalg.svd(linear)
+    r = u @ vt
+    if np.linalg.det(r) < 0.0:
+        u[:, -1] = -u[:, -1]
+        r = u @ vt
+    return r
+
+
+def portal_links(scene: Scene) -> list[PortalLink]:
+    """Every portal with a target, in creation order (inert portals are left out)."""
+    rows = scene.query(Transform, Portal)
+    links = []
+    for entity, (transform, portal) in rows:
+        if portal.target is None:
+            continue
+        try:
+            target = scene.entity(portal.target)
+        except SceneError:
+            raise SceneError(
+                f"no entity is named {portal.target!r}", entity=scene.name_of(entity), field="portal.target"
+            ) from None
+        target_transform = scene.try_get(target, Transform)
+        if target_transform is None or not scene.has(target, Portal):
+            raise SceneError(
+                f"{portal.target!r} is not a portal (a portal's target must be another portal)",
+                entity=scene.name_of(entity),
+                field="portal.target",
+            )
+        inverse = trs_inverse(transform.position, transform.rotation, transform.scale)
+        transfer = trs_matrix(target_transform.position, target_transform.rotation, target_transform.scale) @ inverse
+        links.append(
+            PortalLink(entity, target, inverse, abs(transform.scale[2]), transfer, rotation_part(transfer[:3, :3]))
+        )
+    return links
+
+
+def segment_crossing(link: PortalLink, start: np.ndarray, end: np.ndarray) -> float | None:
+    """Parameter in [0, 1] where the segment passes through the quad (either side), or ``None``.
+
+    A segment that starts on the quad's plane is leaving it, not passing
+    through (that is where a teleport lands); one that ends on it counts.
+    """
+    eps = PLANE_EPS * (1.0 + float(np.max(np.abs(start)))) / link.z_scale
+    a, b = link.local(start), link.local(end)
+    if abs(a[2]) <= eps:
+        return None
+    if abs(b[2]) > eps and (a[2] > 0.0) == (b[2] > 0.0):
+        return None
+    t = min(max(a[2] / (a[2] - b[2]), 0.0), 1.0) if a[2] != b[2] else 1.0
+    hit = a + t * (b - a)
+    if abs(hit[0]) <= 1.0 and abs(hit[1]) <= 1.0:
+        return t
+    return None
+
+
+def first_crossing(
+    links: Sequence[PortalLink], start: np.ndarray, end: np.ndarray, skip: int | None = None
+) -> tuple[float, PortalLink] | None:
+    """The earliest portal the segment passes through (ties: the earlier entity), skipping ``skip``."""
+    best: tuple[float, PortalLink] | None = None
+    for link in links:
+        if link.entity == skip:
+            continue
+        t = segment_crossing(link, start, end)
+        if t is not None and (best is None or t < best[0]):
+            best = (t, link)
+    return best
+
+
+@dataclass
+class TeleportResult:
+    """Where a path ends after portals, the rotation they applied, and which were crossed."""
+
+    position: np.ndarray
+    rotation: np.ndarray  # (3, 3), applied on the left of the camera's rotation
+    crossings: list[PortalLink] = field(default_factory=list)
+
+
+def teleport_path(
+    links: Sequence[PortalLink], path: Sequence[np.ndarray], max_crossings: int = MAX_CROSSINGS
+) -> TeleportResult:
+    """Follow a polyline through portals: at each first crossing, map the rest of it through ``X``."""
+    points = [np.asarray(p, dtype=np.float64) for p in path]
+    rotation = np.eye(3)
+    crossings: list[PortalLink] = []
+    skip: int | None = None
+    i = 0
+    while i < len(points) - 1:
+        hit = first_crossing(links, points[i], points[i + 1], skip if i == 0 else None)
+        if hit is None:
+            i += 1
+            continue
+        t, link = hit
+        crossing = points[i] + t * (points[i + 1] - points[i])
+        arrival = link.map_point(crossing)
+        crossings.append(link)
+        rotation = link.rotation @ rotation
+        if len(crossings) >= max_crossings:
+            return TeleportResult(arrival, rotation, crossings)
+        points = [arrival, *(link.map_point(p) for p in points[i + 1 :])]
+        skip = link.target
+        i = 0
+    return TeleportResult(points[-1], rotation, crossings)
+
+
+class PortalTeleportProcessor(esper.Processor):
+    """Teleports the camera along this tick's path (from :class:`MotionRecord`) through linked portals."""
+
+    def __init__(self, scene: Scene, motion: MotionRecord, max_crossings: int = MAX_CROSSINGS) -> None:
+        self.scene = scene
+        self.motion = motion
+        self.max_crossings = max_crossings
+
+    def process(self, dt: float) -> None:
+        entity = self.scene.camera_entity
+        if entity is None or not self.motion.moved:
+            return
+        links = portal_links(self.scene)
+        if not links:
+            return
+        result = teleport_path(links, self.motion.path, self.max_crossings)
+        if not result.crossings:
+            return
+        self.motion.crossings = [(link.entity, link.target) for link in result.crossings]
+        transform = self.scene.get(entity, Transform)
+        rotation = quat_from_matrix(result.rotation @ quat_to_matrix(transform.rotation))
+        self.scene.set(
+            entity,
+            Transform(
+                tuple(float(c) for c in result.position),  # type: ignore[arg-type]
+                tuple(float(c) for c in rotation),  # type: ignore[arg-type]
+                transform.scale,
+            ),
+        )

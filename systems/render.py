@@ -1,0 +1,39 @@
+"""Render: one frame of the uploaded scene from the scene's camera, left where readers look.
+
+DESIGN.md section 8.4. The app, the editor and tests read the frame from the
+shared :class:`~systems.state.FrameSlot`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import esper
+
+from backends.base import AOVS, Backend
+from engine.packing import scene_camera
+from engine.scene import Scene
+from systems.state import FrameSlot
+
+
+class RenderProcessor(esper.Processor):
+    """Calls the backend once per tick; ``size`` and ``aovs`` may change between ticks (window resize)."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        backend: Backend,
+        slot: FrameSlot,
+        size: tuple[int, int],
+        aovs: Sequence[str] = AOVS,
+    ) -> None:
+        self.scene = scene
+        self.backend = backend
+        self.slot = slot
+        self.size = size
+        self.aovs = tuple(aovs)
+
+    def process(self, dt: float) -> None:
+        width, height = self.size
+        self.slot.frame = self.backend.render(scene_camera(self.scene), width, height, self.aovs)
+        self.slot.frames += 1
