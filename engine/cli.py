@@ -1,0 +1,221 @@
+"""The ``aberrant`` command line: render a scene or demo, list backends, list demos.
+
+Every error a user can cause (a bad scene file, an unknown backend or demo, a
+bad size, an output folder that does not exist) is one line on stderr,
+``aberrant: error: ...``, and exit status 2, with no traceback. Outputs are
+written only after the render succeeded, each through a temporary file and a
+rename, so a failed run never leaves a new or half-written file behind and
+never overwrites an old one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import re
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+import numpy as np
+
+from engine.errors import AberrantError
+
+if TYPE_CHECKING:
+    from backends.base import Frame
+    from engine.scene import Scene
+
+PROG = "aberrant"
+#: The largest image side ``render`` accepts (guards against typos like 80000x600).
+MAX_SIDE = 16384
+#: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
+NPZ_AOVS = ("depth", "perceived", "instance", "events")
+
+
+class UsageError(AberrantError):
+    """A command-line argument is wrong."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but usage errors are one line like every other error (still exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"640x480"`` -> ``(640, 480)``; both sides in [1, MAX_SIDE]."""
+    match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", text)
+    if not match:
+        raise UsageError(f"--size must be WIDTHxHEIGHT in pixels, e.g. 640x480; got {text!r}")
+    width, height = int(match.group(1)), int(match.group(2))
+    for side, value in (("width", width), ("height", height)):
+        if not 1 <= value <= MAX_SIDE:
+            raise UsageError(f"--size {side} must lie in [1, {MAX_SIDE}] pixels; got {text!r}")
+    return width, height
+
+
+def _check_output(option: str, path: Path) -> None:
+    """Fail before rendering when ``path`` cannot be written (so no render time is wasted)."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {path}: the directory {str(parent)!r} does not exist")
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a directory")
+    if not os.access(parent, os.W_OK):
+        raise UsageError(f"{option} {path}: the directory {str(parent)!r} is not writable")
+
+
+def _load(source: str) -> Scene:
+    """A scene from a scene file path or a demo name."""
+    from demos import DEMOS, build_demo
+    from engine.scene_file import load_scene
+
+    path = Path(source)
+    if path.suffix.lower() == ".json" or path.is_file():
+        return load_scene(path)
+    if source in DEMOS:
+        return build_demo(source)
+    raise UsageError(f"{source!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
+
+
+def _png_bytes(color: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(color), mode="RGBA" if color.shape[2] == 4 else "RGB").save(buffer, "PNG")
+    return buffer.getvalue()
+
+
+def _npz_bytes(frame: Frame) -> bytes:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **{name: frame.aov(name) for name in NPZ_AOVS})
+    return buffer.getvalue()
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from backends.base import AOVS, create_backend
+    from engine.app import render_once
+    from engine.scene_file import write_atomically
+
+    width, height = parse_size(args.size)
+    out = Path(args.out)
+    _check_output("--out", out)
+    npz = Path(args.aovs) if args.aovs else None
+    if npz is not None:
+        _check_output("--aovs", npz)
+        if os.path.abspath(npz) == os.path.abspath(out):
+            raise UsageError("--out and --aovs name the same file")
+    scene = _load(args.scene)
+    try:
+        backend = create_backend(args.backend, precision=args.precision, fallback=True)
+        try:
+            aovs = AOVS if npz is not None else ("color",)
+            start = time.perf_counter()
+            frame = render_once(scene, backend, (width, height), aovs)
+            elapsed_ms = (time.perf_counter() - start) * 1e3
+            backend_name = backend.name
+        finally:
+            backend.release()
+    finally:
+        scene.close()
+    outputs = {out: _png_bytes(frame.aov("color"))}
+    if npz is not None:
+        outputs[npz] = _npz_bytes(frame)
+    write_atomically(outputs)
+    for path in outputs:
+        print(f"wrote {path}")
+    render_ms = frame.timings_ms.get("render")
+    detail = f" (render {render_ms:.1f} ms)" if render_ms is not None else ""
+    print(f"{width}x{height} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
+    return 0
+
+
+def cmd_backends(args: argparse.Namespace) -> int:
+    from backends.base import BACKENDS, backend_class, probe
+
+    for name in BACKENDS:
+        reason = probe(name)
+        if reason is not None:
+            print(f"{name}: unavailable: {reason}")
+            continue
+        try:
+            backend = backend_class(name)()
+        except Exception as e:  # probing passed yet it cannot start: report, do not crash the listing
+            print(f"{name}: unavailable: {type(e).__name__}: {e}")
+            continue
+        try:
+            info = backend.info()
+        finally:
+            backend.release()
+        print(f"{name}: available")
+        for key, value in info.items():
+            print(f"  {key}: {value}")
+    return 0
+
+
+def cmd_demos(args: argparse.Namespace) -> int:
+    from demos import demo_names, describe
+
+    names = demo_names()
+    width = max((len(n) for n in names), default=0)
+    for name in names:
+        print(f"{name:<{width}}  {describe(name)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Ray trace triangle-mesh scenes in deformed space.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    render = sub.add_parser("render", help="render one frame of a scene file or demo to a PNG")
+    render.add_argument("scene", metavar="SCENE", help="a scene file (.json) or a demo name (see 'aberrant demos')")
+    render.add_argument(
+        "--backend", default=None, help="reference, glsl, opencl or auto (default: $ABERRANT_BACKEND or auto)"
+    )
+    render.add_argument("--precision", choices=("f32", "f64"), default=None, help="tracing precision")
+    render.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
+    render.add_argument("--out", default="frame.png", help="colour image to write (default frame.png)")
+    render.add_argument(
+        "--aovs", default=None, metavar="FILE.npz", help="also write depth, perceived, instance, events"
+    )
+    render.set_defaults(func=cmd_render)
+
+    backends = sub.add_parser("backends", help="list the tracer backends and whether they can run here")
+    backends.set_defaults(func=cmd_backends)
+
+    demos = sub.add_parser("demos", help="list the demos")
+    demos.set_defaults(func=cmd_demos)
+    return parser
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``aberrant`` console script; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse's --help (0) and usage errors (2)
+        return int(e.code or 0) if not isinstance(e.code, str) else 2
+    try:
+        return int(args.func(args))
+    except AberrantError as e:
+        print(f"{PROG}: error: {_one_line(str(e))}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"{PROG}: error: {where}{_one_line(e.strerror or str(e))}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

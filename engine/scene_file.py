@@ -1,0 +1,556 @@
+"""Scene files: JSON in, JSON out (DESIGN.md section 10).
+
+Loading parses with :mod:`json` only (never executes code), builds the scene
+through the component dataclasses so every value is validated in one place,
+and turns each failure into a one-line :class:`SceneFileError` that names the
+file, the entity and the field. Mesh files are read at load time, so a
+missing or empty mesh fails here rather than in the middle of a render.
+
+Saving writes canonical JSON (fixed key order, every field spelt out, floats
+by ``repr`` so they round-trip exactly, rotations as quaternions) to a
+temporary file beside the target, fsyncs it and renames it over the target:
+a crash leaves either the old file or the new one, never half of one.
+
+Format, version 1::
+
+    {
+      "format": "aberrant-scene", "version": 1, "name": "...",
+      "settings": {"background", "light_dir", "max_events", "event_limit_color", "ambient"},
+      "camera": {"name", "position", "rotation" | "look_at" | "euler_deg", "fov_deg", "speed"},
+      "assets": {NAME: {"path": "relative/to/scene.obj"} | {"primitive": "box"}},
+      "entities": [{"name", "transform": {"position", "rotation" | "euler_deg", "scale"},
+                    "mesh": {...}, "aberration": {...}, "portal": {...}}]
+    }
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import secrets
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from components import Aberration, Camera, Mesh, Portal, Transform, ValidationError
+from components.validation import vec3
+from engine.assets import PRIMITIVES
+from engine.errors import AberrantError, SceneError
+from engine.maths import look_at_quat, quat_from_euler_deg
+from engine.scene import AssetSpec, Scene
+from engine.settings import Settings
+
+FORMAT = "aberrant-scene"
+VERSION = 1
+
+TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities")
+SETTINGS_KEYS = ("background", "light_dir", "max_events", "event_limit_color", "ambient")
+CAMERA_KEYS = ("name", "position", "rotation", "look_at", "euler_deg", "fov_deg", "speed")
+ASSET_KEYS = ("path", "primitive")
+ENTITY_KEYS = ("name", "transform", "mesh", "aberration", "portal")
+TRANSFORM_KEYS = ("position", "rotation", "euler_deg", "scale")
+MESH_KEYS = ("asset", "color", "checker", "cull_backfaces")
+ABERRATION_KEYS = ("deformation", "mode", "exit", "priority", "debug_draw", "color")
+PORTAL_KEYS = ("target", "color", "debug_draw")
+
+#: The camera entity's name when the file does not give one.
+DEFAULT_CAMERA_NAME = "camera"
+
+
+class SceneFileError(AberrantError, ValueError):
+    """A scene file cannot be read or saved; the one-line message names file, entity and field."""
+
+    def __init__(
+        self,
+        file: str,
+        message: str,
+        *,
+        entity: str | None = None,
+        field: str | None = None,
+        kind: str | None = "entity",
+    ) -> None:
+        parts = [file]
+        if entity is not None:
+            parts.append(f"{kind} {entity!r}" if kind else entity)
+        if field is not None:
+            parts.append(f"field {field!r}")
+        super().__init__(": ".join([*parts, message]))
+        self.file = file
+        self.entity = entity
+        self.field = field
+        self.kind = kind
+        self.detail = message
+
+
+# --- reading -----------------------------------------------------------------
+
+
+class _Object(dict):
+    """A JSON object that remembers keys it saw twice (json keeps only the last silently)."""
+
+    duplicates: tuple[str, ...] = ()
+
+
+def _object_pairs(pairs: list[tuple[str, Any]]) -> _Object:
+    obj = _Object(pairs)
+    if len(obj) != len(pairs):
+        seen: set[str] = set()
+        duplicates = []
+        for key, _ in pairs:
+            if key in seen:
+                duplicates.append(key)
+            seen.add(key)
+        obj.duplicates = tuple(duplicates)
+    return obj
+
+
+def _type_name(value: object) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "an array"
+    if isinstance(value, dict):
+        return "an object"
+    return type(value).__name__  # pragma: no cover - json produces nothing else
+
+
+class _Reader:
+    """Turns one parsed document into a Scene, raising errors that say where."""
+
+    def __init__(self, file: str) -> None:
+        self.file = file
+        #: Labels that are not entity names: ``label -> (kind, name)`` for the message.
+        self.labels: dict[str, tuple[str | None, str]] = {}
+
+    def fail(self, message: str, *, entity: str | None = None, field: str | None = None) -> SceneFileError:
+        """An error about ``entity`` (an entity name, ``asset 'x'`` or ``entities[i]``)."""
+        kind: str | None = "entity"
+        if entity is not None and entity in self.labels:
+            kind, entity = self.labels[entity]
+        return SceneFileError(self.file, message, entity=entity, field=field, kind=kind)
+
+    def obj(
+        self, value: object, allowed: tuple[str, ...] | None, field: str, entity: str | None = None
+    ) -> dict[str, Any]:
+        """``value`` as a JSON object holding only ``allowed`` keys (any keys when ``None``)."""
+        if not isinstance(value, dict):
+            raise self.fail(f"expected an object, got {_type_name(value)}", entity=entity, field=field or None)
+        duplicates = getattr(value, "duplicates", ())
+        prefix = f"{field}." if field else ""
+        if duplicates:
+            raise self.fail(
+                f"the key {duplicates[0]!r} appears more than once", entity=entity, field=f"{prefix}{duplicates[0]}"
+            )
+        unknown = [] if allowed is None else [k for k in value if k not in allowed]
+        if unknown:
+            raise self.fail(
+                f"unknown key {unknown[0]!r}; allowed keys: {', '.join(allowed or ())}",
+                entity=entity,
+                field=f"{prefix}{unknown[0]}",
+            )
+        return value
+
+    def component(self, factory: Callable[..., Any], fields: dict[str, Any], field: str, entity: str | None) -> Any:
+        """Build a component, reporting its validation error under ``field``."""
+        try:
+            return factory(**fields)
+        except ValidationError as e:
+            raise self.fail(e.message, entity=entity, field=f"{field}.{e.field}" if field else e.field) from None
+
+    def rotation(self, block: dict[str, Any], field: str, entity: str | None, position: object) -> object:
+        """The quaternion named by ``rotation``, ``euler_deg`` or (cameras) ``look_at``; at most one."""
+        given = [k for k in ("rotation", "euler_deg", "look_at") if k in block]
+        if len(given) > 1:
+            raise self.fail(
+                f"give only one of {', '.join(given)} (they all set the rotation)",
+                entity=entity,
+                field=f"{field}.{given[1]}",
+            )
+        try:
+            if "euler_deg" in block:
+                return tuple(float(c) for c in quat_from_euler_deg(vec3(block["euler_deg"], "euler_deg")))
+            if "look_at" in block:
+                target = vec3(block["look_at"], "look_at")
+                eye = vec3(position, "position")
+                if max(abs(a - b) for a, b in zip(eye, target, strict=True)) < 1e-12:
+                    raise ValidationError("look_at", "the point looked at equals the camera position")
+                return tuple(float(c) for c in look_at_quat(eye, target))
+        except ValidationError as e:
+            raise self.fail(e.message, entity=entity, field=f"{field}.{e.field}") from None
+        rotation = block.get("rotation", (0.0, 0.0, 0.0, 1.0))
+        return tuple(rotation) if isinstance(rotation, list) else rotation
+
+    def transform(self, value: object, field: str, entity: str) -> Transform:
+        block = self.obj(value, TRANSFORM_KEYS, field, entity)
+        position = block.get("position", (0.0, 0.0, 0.0))
+        rotation = self.rotation(block, field, entity, position)
+        scale = block.get("scale", (1.0, 1.0, 1.0))
+        if isinstance(scale, int | float) and not isinstance(scale, bool):
+            scale = (scale, scale, scale)  # a uniform scale may be written as one number
+        return self.component(Transform, {"position": position, "rotation": rotation, "scale": scale}, field, entity)
+
+    def read(self, doc: object, base_dir: Path) -> Scene:
+        top = self.obj(doc, TOP_KEYS, "")
+        if top.get("format") != FORMAT:
+            got = "missing" if "format" not in top else repr(top["format"])
+            raise self.fail(f"not an aberrant scene file: expected {FORMAT!r}, got {got}", field="format")
+        version = top.get("version")
+        if isinstance(version, bool) or not isinstance(version, int):
+            raise self.fail(f"expected the integer {VERSION}, got {version!r}", field="version")
+        if version != VERSION:
+            newer = "newer than" if version > VERSION else "not"
+            raise self.fail(
+                f"scene file version {version} is {newer} supported (this aberrant reads version {VERSION})",
+                field="version",
+            )
+        name = top.get("name", "untitled")
+        if not isinstance(name, str):
+            raise self.fail(f"expected a string, got {_type_name(name)}", field="name")
+        settings = self.component(
+            Settings, self.obj(top.get("settings", {}), SETTINGS_KEYS, "settings"), "settings", None
+        )
+        scene = Scene(name, settings=settings, base_dir=base_dir)
+        try:
+            self.fill(scene, top)
+        except BaseException:
+            scene.close()
+            raise
+        return scene
+
+    def fill(self, scene: Scene, top: dict[str, Any]) -> None:
+        assets = self.obj(top.get("assets", {}), None, "assets")
+        for asset_name, spec in assets.items():
+            self.asset(scene, asset_name, spec)
+        if "camera" in top:
+            self.camera(scene, top["camera"])
+        entities = top.get("entities", [])
+        if not isinstance(entities, list):
+            raise self.fail(f"expected an array of entities, got {_type_name(entities)}", field="entities")
+        for index, value in enumerate(entities):
+            self.entity(scene, index, value)
+        self.check(scene)
+
+    def asset_label(self, name: str) -> str:
+        label = f"\0asset:{name}"
+        self.labels[label] = ("asset", name)
+        return label
+
+    def asset(self, scene: Scene, name: str, value: object) -> None:
+        where = self.asset_label(name)
+        field = f"assets.{name}"
+        if not name:
+            raise self.fail("an asset name must not be empty", field="assets")
+        block = self.obj(value, ASSET_KEYS, field, where)
+        for key in ASSET_KEYS:
+            if key in block and (not isinstance(block[key], str) or not block[key]):
+                raise self.fail(
+                    f"expected a non-empty string, got {block[key]!r}", entity=where, field=f"{field}.{key}"
+                )
+        try:
+            AssetSpec(block.get("primitive"), block.get("path"))
+        except ValidationError as e:
+            sub = "" if e.field == "asset" else f".{e.field}"
+            raise self.fail(e.message, entity=where, field=f"{field}{sub}") from None
+        scene.add_asset(name, primitive=block.get("primitive"), path=block.get("path"))
+
+    def camera(self, scene: Scene, value: object) -> None:
+        block = self.obj(value, CAMERA_KEYS, "camera", DEFAULT_CAMERA_NAME)
+        name = block.get("name", DEFAULT_CAMERA_NAME)
+        if not isinstance(name, str) or not name.strip():
+            raise self.fail(
+                f"expected a non-empty string, got {name!r}", entity=DEFAULT_CAMERA_NAME, field="camera.name"
+            )
+        position = block.get("position", (0.0, 0.0, 0.0))
+        rotation = self.rotation(block, "camera", name, position)
+        transform = self.component(Transform, {"position": position, "rotation": rotation}, "camera", name)
+        lens = {k: block[k] for k in ("fov_deg", "speed") if k in block}
+        camera = self.component(Camera, lens, "camera", name)
+        scene.camera_entity = self.create(scene, name, "camera.name", transform, camera)
+
+    def entity(self, scene: Scene, index: int, value: object) -> None:
+        label = f"\0entities[{index}]"
+        self.labels[label] = (None, label[1:])
+        if isinstance(value, dict) and isinstance(value.get("name"), str) and value["name"].strip():
+            label = value["name"]
+        block = self.obj(value, ENTITY_KEYS, "", label)
+        if "name" not in block:
+            raise self.fail("every entity needs a unique 'name'", entity=label, field="name")
+        if not isinstance(block["name"], str) or not block["name"].strip():
+            raise self.fail(f"expected a non-empty string, got {block['name']!r}", entity=label, field="name")
+        parts: list[object] = [self.transform(block.get("transform", {}), "transform", label)]
+        if "mesh" in block:
+            fields = self.obj(block["mesh"], MESH_KEYS, "mesh", label)
+            if "asset" not in fields:
+                raise self.fail(
+                    "a mesh needs an 'asset' (a declared asset or a primitive)", entity=label, field="mesh.asset"
+                )
+            mesh = self.component(Mesh, dict(fields), "mesh", label)
+            if mesh.asset not in scene.assets and mesh.asset not in PRIMITIVES:
+                known = ", ".join(sorted(scene.assets)) or "none declared"
+                raise self.fail(
+                    f"unknown asset {mesh.asset!r} (assets: {known}; primitives: {', '.join(PRIMITIVES)})",
+                    entity=label,
+                    field="mesh.asset",
+                )
+            parts.append(mesh)
+        if "aberration" in block:
+            parts.append(
+                self.component(
+                    Aberration,
+                    dict(self.obj(block["aberration"], ABERRATION_KEYS, "aberration", label)),
+                    "aberration",
+                    label,
+                )
+            )
+        if "portal" in block:
+            parts.append(
+                self.component(Portal, dict(self.obj(block["portal"], PORTAL_KEYS, "portal", label)), "portal", label)
+            )
+        self.create(scene, label, "name", *parts)
+
+    def create(self, scene: Scene, name: str, field: str, *components: object) -> int:
+        try:
+            return scene.create_entity(name, *components)
+        except SceneError as e:
+            raise self.fail(e.detail, entity=name, field=field) from None
+
+    def check(self, scene: Scene) -> None:
+        """Cross-entity checks: portal targets, then every mesh file (so a missing one fails now)."""
+        for entity, portal in scene.query(Portal):
+            if portal.target is None:
+                continue
+            label = scene.name_of(entity)
+            try:
+                target = scene.entity(portal.target)
+            except SceneError:
+                raise self.fail(f"no entity is named {portal.target!r}", entity=label, field="portal.target") from None
+            if not scene.has(target, Portal):
+                raise self.fail(f"{portal.target!r} is not a portal", entity=label, field="portal.target")
+        loaded: set[str] = set()
+        for entity, mesh in scene.query(Mesh):
+            if mesh.asset not in loaded:
+                self.load_asset(scene, mesh.asset, entity=scene.name_of(entity), field="mesh.asset")
+                loaded.add(mesh.asset)
+        for name in scene.assets:
+            if name not in loaded:
+                self.load_asset(scene, name, entity=self.asset_label(name), field=f"assets.{name}")
+
+    def load_asset(self, scene: Scene, name: str, *, entity: str, field: str) -> None:
+        try:
+            scene.asset(name)
+        except AberrantError as e:
+            raise self.fail(f"asset {name!r}: {e}", entity=entity, field=field) from None
+
+
+def load_scene(path: str | os.PathLike[str]) -> Scene:
+    """Read a scene file; raises :class:`SceneFileError` naming file, entity and field on any problem."""
+    file = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneFileError(file, "scene file not found") from None
+    except IsADirectoryError:
+        raise SceneFileError(file, "is a directory, not a scene file") from None
+    except UnicodeDecodeError as e:
+        raise SceneFileError(file, f"not UTF-8 text (byte {e.start}): not a scene file") from None
+    except OSError as e:
+        raise SceneFileError(file, f"cannot read scene file ({e.strerror or e})") from None
+    try:
+        doc = json.loads(text, object_pairs_hook=_object_pairs)
+    except json.JSONDecodeError as e:
+        raise SceneFileError(file, f"line {e.lineno}, column {e.colno}: malformed JSON: {e.msg}") from None
+    except RecursionError:
+        raise SceneFileError(file, "malformed JSON: nested too deeply") from None
+    return _Reader(file).read(doc, Path(os.path.abspath(path)).parent)
+
+
+# --- writing -----------------------------------------------------------------
+
+
+def _floats(values: tuple[float, ...]) -> list[float]:
+    return [float(v) for v in values]
+
+
+def _asset_path(scene: Scene, spec: AssetSpec, target_dir: Path) -> str:
+    """Where the asset is, as the saved file should say: relative when inside its folder, else absolute."""
+    location = Path(os.path.abspath(scene.asset_path(spec)))
+    try:
+        return location.relative_to(target_dir).as_posix()
+    except ValueError:
+        return str(location)
+
+
+def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, Any]:
+    """The JSON document of a scene (asset paths relative to ``target_dir`` where they can be)."""
+    target_dir = Path(os.path.abspath(target_dir if target_dir is not None else Path.cwd()))
+    s = scene.settings
+    doc: dict[str, Any] = {
+        "format": FORMAT,
+        "version": VERSION,
+        "name": scene.name,
+        "settings": {
+            "background": _floats(s.background),
+            "light_dir": _floats(s.light_dir),
+            "max_events": s.max_events,
+            "event_limit_color": _floats(s.event_limit_color),
+            "ambient": float(s.ambient),
+        },
+    }
+    camera_entity = scene.camera_entity
+    if camera_entity is not None:
+        transform = scene.get(camera_entity, Transform)
+        camera = scene.get(camera_entity, Camera)
+        doc["camera"] = {
+            "name": scene.name_of(camera_entity),
+            "position": _floats(transform.position),
+            "rotation": _floats(transform.rotation),
+            "fov_deg": float(camera.fov_deg),
+            "speed": float(camera.speed),
+        }
+    assets: dict[str, Any] = {}
+    for name in sorted(scene.assets):
+        spec = scene.assets[name]
+        assets[name] = (
+            {"primitive": spec.primitive}
+            if spec.primitive is not None
+            else {"path": _asset_path(scene, spec, target_dir)}
+        )
+    doc["assets"] = assets
+    entities = []
+    for entity in scene.entities():
+        if entity == camera_entity:
+            continue
+        name = scene.name_of(entity)
+        if scene.has(entity, Camera):
+            raise SceneError(
+                "only the active camera can be saved; this entity also has a Camera", entity=name, field="camera"
+            )
+        transform = scene.try_get(entity, Transform) or Transform()
+        item: dict[str, Any] = {
+            "name": name,
+            "transform": {
+                "position": _floats(transform.position),
+                "rotation": _floats(transform.rotation),
+                "scale": _floats(transform.scale),
+            },
+        }
+        mesh = scene.try_get(entity, Mesh)
+        if mesh is not None:
+            item["mesh"] = {
+                "asset": mesh.asset,
+                "color": _floats(mesh.color),
+                "checker": float(mesh.checker),
+                "cull_backfaces": mesh.cull_backfaces,
+            }
+        aberration = scene.try_get(entity, Aberration)
+        if aberration is not None:
+            item["aberration"] = {
+                "deformation": _floats(aberration.deformation),
+                "mode": aberration.mode,
+                "exit": aberration.exit,
+                "priority": aberration.priority,
+                "debug_draw": aberration.debug_draw,
+                "color": _floats(aberration.color),
+            }
+        portal = scene.try_get(entity, Portal)
+        if portal is not None:
+            item["portal"] = {"target": portal.target, "color": _floats(portal.color), "debug_draw": portal.debug_draw}
+        entities.append(item)
+    doc["entities"] = entities
+    return doc
+
+
+def _scalar(value: object) -> str:
+    if isinstance(value, float):
+        if not math.isfinite(value):  # components never hold these; refuse rather than write invalid JSON
+            raise ValueError(f"cannot save the non-finite number {value!r}")
+        return repr(value)
+    return json.dumps(value, ensure_ascii=False)
+
+
+def dumps(value: object, indent: int = 0) -> str:
+    """Canonical JSON: objects one key a line (2-space indent), arrays of scalars on one line."""
+    pad = "  " * (indent + 1)
+    if isinstance(value, dict):
+        if not value:
+            return "{}"
+        items = [f"{pad}{json.dumps(str(k), ensure_ascii=False)}: {dumps(v, indent + 1)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + "  " * indent + "}"
+    if isinstance(value, list | tuple):
+        if not value:
+            return "[]"
+        if all(not isinstance(v, dict | list | tuple) for v in value):
+            return "[" + ", ".join(_scalar(v) for v in value) + "]"
+        return "[\n" + ",\n".join(pad + dumps(v, indent + 1) for v in value) + "\n" + "  " * indent + "]"
+    return _scalar(value)
+
+
+def scene_to_json(scene: Scene, target_dir: Path | None = None) -> str:
+    """The exact text :func:`save_scene` writes."""
+    return dumps(scene_document(scene, target_dir)) + "\n"
+
+
+def write_atomically(outputs: Mapping[str | os.PathLike[str], bytes]) -> None:
+    """Write each file via a temporary sibling, fsync, then rename over the target.
+
+    All temporaries are written before any rename, so an error while writing
+    leaves every target untouched and no temporary behind.
+    """
+    staged: list[tuple[str, Path]] = []
+    try:
+        for target, data in outputs.items():
+            path = Path(target)
+            tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # umask applies, like a normal file
+            staged.append((str(tmp), path))
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            with contextlib.suppress(FileNotFoundError):  # keep an existing file's permissions
+                os.chmod(tmp, os.stat(path).st_mode & 0o7777)
+        while staged:
+            tmp_name, path = staged[0]
+            os.replace(tmp_name, path)
+            staged.pop(0)
+            _fsync_dir(path.parent)
+    finally:
+        for tmp_name, _ in staged:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp_name)
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
+    """Write ``scene`` to ``path`` atomically; raises :class:`SceneFileError` (old file intact) on failure."""
+    file = str(path)
+    target_dir = Path(os.path.abspath(path)).parent
+    try:
+        text = scene_to_json(scene, target_dir)
+    except SceneError as e:
+        raise SceneFileError(file, f"cannot save: {e.detail}", entity=e.entity, field=e.field) from None
+    try:
+        write_atomically({path: text.encode("utf-8")})
+    except OSError as e:
+        raise SceneFileError(file, f"cannot save ({e.strerror or e})") from e
