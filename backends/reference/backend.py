@@ -1,0 +1,129 @@
+"""The float64 NumPy reference tracer: slow, simple, and the truth other backends are measured against."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import ClassVar
+
+import numpy as np
+
+from backends.base import AOVS, Backend, Frame
+from backends.reference.trace import ShadingSettings, TraceResult, to_uint8, trace
+from backends.reference.traverse import Geometry
+from engine.errors import AberrantError
+from engine.layout import Precision
+from engine.packing import CameraView, Features, PackedScene, TableUpdate
+
+#: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
+_MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes")
+_INSTANCE_TABLES = ("instances", "materials")
+
+
+class ReferenceBackend(Backend):
+    """Traces every pixel in float64 with NumPy, vectorised over rays (DESIGN.md sections 3–5)."""
+
+    name: ClassVar[str] = "reference"
+    precisions: ClassVar[tuple[Precision, ...]] = ("f64",)
+    camera_relative: ClassVar[bool] = False
+
+    def __init__(self, precision: Precision | None = None) -> None:
+        super().__init__(precision)
+        self._tables: dict[str, np.ndarray] = {}
+        self._counts: dict[str, int] = {}
+        self._origin = np.zeros(3)
+        self._features = Features()
+        self._geometry: Geometry | None = None
+        self._settings: ShadingSettings | None = None
+
+    @classmethod
+    def probe(cls) -> str | None:
+        return None  # NumPy is a core dependency
+
+    def info(self) -> dict[str, str]:
+        return {"device": "CPU (NumPy)", "numpy": np.__version__, "precision": "float64"}
+
+    @property
+    def features(self) -> Features:
+        """What the last uploaded scene contains."""
+        return self._features
+
+    def upload(self, packed: PackedScene, updates: Sequence[TableUpdate]) -> int:
+        """Copy the changed tables (or rows), as a device upload would; returns the bytes moved."""
+        updates = list(updates)
+        for u in updates:
+            source = packed.tables[u.table]
+            mine = self._tables.get(u.table)
+            if u.rows is None or mine is None or mine.shape != source.shape or mine.dtype != source.dtype:
+                self._tables[u.table] = source.copy()
+            else:
+                mine[u.rows.start : u.rows.stop] = source[u.rows.start : u.rows.stop]
+        for name, table in packed.tables.items():  # a first upload given a partial list still gets everything
+            if name not in self._tables:
+                self._tables[name] = table.copy()
+        self._counts = dict(packed.counts)
+        self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
+        self._features = packed.features
+        changed = {u.table for u in updates}
+        if self._geometry is None or changed & set(_MESH_TABLES):
+            self._geometry = Geometry.from_tables(self._tables, self._counts)
+        elif changed & set(_INSTANCE_TABLES):
+            self._geometry = Geometry.from_tables(self._tables, self._counts, reuse_mesh_data=self._geometry)
+        if self._settings is None or "settings" in changed:
+            self._settings = ShadingSettings.from_table(self._tables["settings"])
+        return packed.update_bytes(updates)
+
+    def trace_rays(self, origin: np.ndarray, directions: np.ndarray) -> TraceResult:
+        """Trace arbitrary world rays (unit ``directions`` (N, 3)) and keep the float64 results.
+
+        For tests and error reports that need more than the float32 AOVs.
+        """
+        if self._geometry is None or self._settings is None:
+            raise AberrantError("reference backend: trace_rays() before upload(); upload a packed scene first")
+        o = np.asarray(origin, dtype=np.float64) - self._origin
+        d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+        return trace(self._geometry, self._settings, o, d, self._origin)
+
+    @property
+    def geometry(self) -> Geometry:
+        """The uploaded mesh tables as float64 arrays (for tests and tools)."""
+        if self._geometry is None:
+            raise AberrantError("reference backend: nothing uploaded yet")
+        return self._geometry
+
+    def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
+        """Trace one frame; only the requested AOVs are filled."""
+        if self._geometry is None or self._settings is None:
+            raise AberrantError("reference backend: render() before upload(); upload a packed scene first")
+        unknown = [a for a in aovs if a not in AOVS]
+        if unknown:
+            raise AberrantError(f"unknown AOV(s) {', '.join(map(repr, unknown))}; AOVs are {', '.join(AOVS)}")
+        width, height = int(width), int(height)
+        if width <= 0 or height <= 0:
+            raise AberrantError(f"image size must be positive, got {width}x{height}")
+        start = time.perf_counter()
+        directions = camera.primary_directions(width, height).reshape(-1, 3)
+        origin = np.asarray(camera.position, dtype=np.float64) - self._origin
+        result = trace(self._geometry, self._settings, origin, directions, self._origin)
+        frame = _frame(result, width, height, aovs)
+        frame.timings_ms["render"] = (time.perf_counter() - start) * 1e3
+        return frame
+
+
+def _frame(result: TraceResult, width: int, height: int, aovs: Sequence[str]) -> Frame:
+    """Reshape per-ray results into the requested AOV images (row 0 = top)."""
+    frame = Frame(width, height)
+    shape = (height, width)
+    if "color" in aovs:
+        rgba = np.full((*shape, 4), 255, np.uint8)
+        rgba[..., :3] = to_uint8(result.color).reshape(*shape, 3)
+        frame.color = rgba
+    if "depth" in aovs:
+        frame.depth = result.depth.astype(np.float32).reshape(shape)
+    if "perceived" in aovs:
+        frame.perceived = result.perceived.astype(np.float32).reshape(shape)
+    if "instance" in aovs:
+        frame.instance = result.instance.astype(np.int32).reshape(shape)
+    if "events" in aovs:
+        frame.events = np.minimum(result.events, 255).astype(np.uint8).reshape(shape)
+    return frame
