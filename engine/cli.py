@@ -1,4 +1,5 @@
-"""The ``aberrant`` command line: render a scene or demo, list backends, list demos.
+"""The ``aberrant`` command line: render a scene or demo (a frame or a flythrough), import
+TelloEngine scenes, list backends, list demos.
 
 Every error a user can cause (a bad scene file, an unknown backend or demo, a
 bad size, an output folder that does not exist) is one line on stderr,
@@ -101,8 +102,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     from engine.app import render_once
     from engine.scene_file import write_atomically
 
+    if args.path:
+        return cmd_render_path(args)
+    if args.frames is not None or args.fps is not None:
+        raise UsageError("--frames and --fps render a flythrough; add --path")
     width, height = parse_size(args.size)
-    out = Path(args.out)
+    out = Path(args.out or "frame.png")
     _check_output("--out", out)
     npz = Path(args.aovs) if args.aovs else None
     if npz is not None:
@@ -131,6 +136,56 @@ def cmd_render(args: argparse.Namespace) -> int:
     render_ms = frame.timings_ms.get("render")
     detail = f" (render {render_ms:.1f} ms)" if render_ms is not None else ""
     print(f"{width}x{height} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
+    return 0
+
+
+def cmd_render_path(args: argparse.Namespace) -> int:
+    """``render --path``: a flythrough walked by the real systems (engine/flythrough.py)."""
+    from backends.base import create_backend
+    from engine.flythrough import check_output, path_for, render_flythrough
+
+    if args.aovs:
+        raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
+    width, height = parse_size(args.size)
+    frames = 48 if args.frames is None else args.frames
+    if frames < 1:
+        raise UsageError(f"--frames must be at least 1, got {frames}")
+    out = Path(args.out or "flythrough.gif")
+    check_output(out)
+    scene = _load(args.scene)
+    try:
+        path = path_for(args.scene, scene)
+        backend = create_backend(args.backend, precision=args.precision, fallback=True)
+        try:
+            start = time.perf_counter()
+            render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
+            elapsed = time.perf_counter() - start
+            backend_name = backend.name
+        finally:
+            backend.release()
+    finally:
+        scene.close()
+    print(f"wrote {out}")
+    print(f"{frames} frames of {width}x{height} with the {backend_name} backend in {elapsed:.1f} s")
+    return 0
+
+
+def cmd_import_tello(args: argparse.Namespace) -> int:
+    """``import-tello``: a TelloEngine scene file to our scene format (engine/tello.py)."""
+    from engine.tello import import_tello
+
+    scene_file = Path(args.scene_file)
+    mesh_dir = Path(args.mesh_dir) if args.mesh_dir else Path(os.path.abspath(scene_file)).parent.parent / "Mesh"
+    out = Path(args.out)
+    _check_output("--out", out)
+    result = import_tello(scene_file, mesh_dir, out, checker=args.checker)
+    result.scene.close()
+    for warning in result.warnings:
+        print(f"{PROG}: warning: {_one_line(warning)}", file=sys.stderr)
+    for path in result.mesh_files:
+        print(f"wrote {path}")
+    counts = ", ".join(f"{n} {kind}" for kind, n in result.counts.items())
+    print(f"wrote {out} ({counts}; camera: {result.camera})")
     return 0
 
 
@@ -171,18 +226,34 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Ray trace triangle-mesh scenes in deformed space.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
-    render = sub.add_parser("render", help="render one frame of a scene file or demo to a PNG")
+    render = sub.add_parser("render", help="render one frame (or, with --path, a flythrough) of a scene or demo")
     render.add_argument("scene", metavar="SCENE", help="a scene file (.json) or a demo name (see 'aberrant demos')")
     render.add_argument(
         "--backend", default=None, help="reference, glsl, opencl or auto (default: $ABERRANT_BACKEND or auto)"
     )
     render.add_argument("--precision", choices=("f32", "f64"), default=None, help="tracing precision")
     render.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
-    render.add_argument("--out", default="frame.png", help="colour image to write (default frame.png)")
+    render.add_argument(
+        "--out", default=None, help="colour image to write (default frame.png); with --path: .mp4, .gif or a folder"
+    )
     render.add_argument(
         "--aovs", default=None, metavar="FILE.npz", help="also write depth, perceived, instance, events"
     )
+    render.add_argument(
+        "--path", action="store_true", help="render a flythrough: the demo's camera_path(), else a walk forward"
+    )
+    render.add_argument("--frames", type=int, default=None, help="flythrough frames (default 48)")
+    render.add_argument("--fps", type=float, default=None, help="flythrough frame rate (default: real time)")
     render.set_defaults(func=cmd_render)
+
+    tello = sub.add_parser("import-tello", help="convert a TelloEngine (thesis engine) scene file to a scene file")
+    tello.add_argument("scene_file", metavar="SCENE_FILE", help="a TelloEngine scene file (JSON + NUL)")
+    tello.add_argument("--mesh-dir", default=None, help="its mesh resources (default: ../Mesh beside its folder)")
+    tello.add_argument("--out", required=True, help="scene file to write; meshes go to <out stem>_meshes/ beside it")
+    tello.add_argument(
+        "--checker", type=float, default=0.125, help="checker cell size in UV units, like the thesis texture (0: none)"
+    )
+    tello.set_defaults(func=cmd_import_tello)
 
     backends = sub.add_parser("backends", help="list the tracer backends and whether they can run here")
     backends.set_defaults(func=cmd_backends)
