@@ -18,9 +18,8 @@ the aberrations (which scale the step) and the portal system teleports it, and
 after a teleport the path carries on *relative to the camera*: a path is a
 sequence of local moves, exactly like a recorded walk. In plain space the
 camera follows the path to its end. The movement system normalises the move
-direction and multiplies by the camera's speed, so each tick the source sets
-the camera's ``speed`` to (path step) / dt just before the system reads it
-(it polls the input first) and restores the original speed at the end.
+direction, so each tick's input carries the speed override
+``InputState.speed = (path step) / dt``; the Camera component is never edited.
 
 The system's camera has no roll and keeps pitch within ±89°, so the path is
 followed by the yaw/pitch part of its orientations (roll is dropped).
@@ -35,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from components import Camera, Transform
+from components import Transform
 from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
 from engine.maths import look_at_quat, quat_conjugate, quat_from_axis_angle, quat_multiply, quat_to_matrix
@@ -242,8 +241,6 @@ class PathInput:
         self.scene = scene
         self.rate = rate
         self.time = path.start
-        self.entity = scene.camera_entity
-        self.original: Camera = scene.get(self.entity, Camera)
 
     @property
     def done(self) -> bool:
@@ -251,8 +248,6 @@ class PathInput:
 
     def poll(self, dt: float) -> InputState:
         if self.done or not dt > 0.0:
-            if self.done:
-                self.restore()
             return NO_INPUT
         t0 = self.time
         t1 = min(t0 + dt * self.rate, self.path.end)
@@ -265,16 +260,9 @@ class PathInput:
         # The system turns first, then moves along the turned camera's axes: express the step in that frame.
         move = quat_to_matrix(yaw_pitch_quat(yaw1, pitch1)).T @ (p1 - p0)
         step = float(np.linalg.norm(move))
-        if step > 1e-12:
-            self.scene.set(self.entity, Camera(self.original.fov_deg, step / dt))
-            move = move / step
-        else:
-            move = np.zeros(3)
-        return InputState(tuple(float(c) for c in move), (d_yaw, pitch1 - pitch0))  # type: ignore[arg-type]
-
-    def restore(self) -> None:
-        """Give the camera back its own speed (idempotent)."""
-        if self.entity in self.scene.entities():
-            current = self.scene.get(self.entity, Camera)
-            if current != self.original:
-                self.scene.set(self.entity, Camera(current.fov_deg, self.original.speed))
+        move = move / step if step > 1e-12 else np.zeros(3)
+        return InputState(
+            tuple(float(c) for c in move),  # type: ignore[arg-type]
+            (d_yaw, pitch1 - pitch0),
+            speed=step / dt,
+        )

@@ -248,7 +248,6 @@ def render_flythrough(
         sink.discard()
         raise
     finally:
-        walker.restore()
         bar.finish()
     return frames
 

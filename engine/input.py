@@ -32,17 +32,26 @@ class InputState:
     -z forward); the movement system normalises it, so only its direction
     counts. ``look`` is ``(yaw_deg, pitch_deg)`` turned this tick: positive
     yaw turns left (about world +Y), positive pitch looks up (about the
-    camera's local +X). ``sprint`` multiplies the speed.
+    camera's local +X). ``sprint`` multiplies the speed. ``speed``, when
+    given, replaces the camera's perceived speed for this tick: scripted
+    drivers (camera paths) set the exact step they want without editing the
+    Camera component.
     """
 
     move: Vec3 = (0.0, 0.0, 0.0)
     look: tuple[float, float] = (0.0, 0.0)
     sprint: bool = False
+    speed: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "move", _finite_tuple(self.move, 3, "move"))
         object.__setattr__(self, "look", _finite_tuple(self.look, 2, "look"))
         object.__setattr__(self, "sprint", bool(self.sprint))
+        if self.speed is not None:
+            speed = float(self.speed)
+            if not (math.isfinite(speed) and speed >= 0.0):
+                raise ValueError(f"InputState.speed: must be a finite number >= 0, got {self.speed!r}")
+            object.__setattr__(self, "speed", speed)
 
     @property
     def idle(self) -> bool:

@@ -217,7 +217,8 @@ class CameraMovementProcessor(esper.Processor):
         camera = self.scene.get(entity, Camera)
         rotation = apply_look(transform.rotation, *state.look)
         multiplier = self.sprint_multiplier if state.sprint else 1.0
-        v = perceived_velocity(rotation, state.move, camera.speed, multiplier)
+        speed = camera.speed if state.speed is None else state.speed
+        v = perceived_velocity(rotation, state.move, speed, multiplier)
         position = np.asarray(transform.position, dtype=np.float64)
         if np.any(v) and dt > 0.0:
             path = walk(speed_boxes(self.scene), position, v, dt, self.max_substeps)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from backends.base import AOVS, Backend, Frame
-from components import Transform
+from components import Camera, Transform
 from engine.app import App
 from engine.errors import SceneError
 from engine.input import InputState, NoInput, ScriptedInput
@@ -134,6 +134,16 @@ def test_sprint_multiplies_speed(make_scene):
     scene = make_scene()
     play(scene, [InputState(move=(0.0, 0.0, -1.0), sprint=True)] * 3, dt=0.1)
     assert np.allclose(position(scene), (0.0, 0.0, -3 * 3.0 * SPRINT_MULTIPLIER * 0.1), atol=1e-12)
+
+
+def test_speed_override_replaces_camera_speed_for_one_tick(make_scene):
+    scene = make_scene()
+    camera_before = scene.get(scene.camera_entity, Camera)
+    play(scene, [InputState(move=(0.0, 0.0, -1.0), speed=0.5), FORWARD], dt=1.0)
+    assert np.allclose(position(scene), (0.0, 0.0, -0.5 - 3.0), atol=1e-12)
+    assert scene.get(scene.camera_entity, Camera) == camera_before
+    with pytest.raises(ValueError, match=r"InputState\.speed"):
+        InputState(speed=-1.0)
 
 
 def test_custom_sprint_multiplier(make_scene):
