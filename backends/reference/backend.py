@@ -9,7 +9,10 @@ from typing import ClassVar
 import numpy as np
 
 from backends.base import AOVS, Backend, Frame
-from backends.reference.trace import ShadingSettings, TraceResult, to_uint8, trace
+from backends.reference.aberrations import Boxes, SigmaBounds
+from backends.reference.portals import Portals
+from backends.reference.shading import ShadingSettings, to_uint8
+from backends.reference.trace import Space, TraceResult, trace
 from backends.reference.traverse import Geometry
 from engine.errors import AberrantError
 from engine.layout import Precision
@@ -21,7 +24,7 @@ _INSTANCE_TABLES = ("instances", "materials")
 
 
 class ReferenceBackend(Backend):
-    """Traces every pixel in float64 with NumPy, vectorised over rays (DESIGN.md sections 3–5)."""
+    """Traces every pixel in float64 with NumPy, vectorised over rays (DESIGN.md sections 3–7)."""
 
     name: ClassVar[str] = "reference"
     precisions: ClassVar[tuple[Precision, ...]] = ("f64",)
@@ -35,6 +38,8 @@ class ReferenceBackend(Backend):
         self._features = Features()
         self._geometry: Geometry | None = None
         self._settings: ShadingSettings | None = None
+        self._boxes = Boxes.empty()
+        self._portals = Portals.empty()
 
     @classmethod
     def probe(cls) -> str | None:
@@ -71,18 +76,30 @@ class ReferenceBackend(Backend):
             self._geometry = Geometry.from_tables(self._tables, self._counts, reuse_mesh_data=self._geometry)
         if self._settings is None or "settings" in changed:
             self._settings = ShadingSettings.from_table(self._tables["settings"])
+        # A few rows each: converted on every upload, so they can never go stale.
+        self._boxes = Boxes.from_table(self._tables["aberrations"], self._counts.get("aberrations", 0))
+        self._portals = Portals.from_table(self._tables["portals"], self._counts.get("portals", 0))
         return packed.update_bytes(updates)
 
-    def trace_rays(self, origin: np.ndarray, directions: np.ndarray) -> TraceResult:
+    def trace_rays(
+        self, origin: np.ndarray, directions: np.ndarray, sigma: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> TraceResult:
         """Trace arbitrary world rays (unit ``directions`` (N, 3)) and keep the float64 results.
 
         For tests and error reports that need more than the float32 AOVs.
+        ``sigma`` is the radial mode's ``(m, M)`` (``CameraView.sigma_bounds``);
+        without it every axis spans [-1, 1].
         """
         if self._geometry is None or self._settings is None:
             raise AberrantError("reference backend: trace_rays() before upload(); upload a packed scene first")
         o = np.asarray(origin, dtype=np.float64) - self._origin
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-        return trace(self._geometry, self._settings, o, d, self._origin)
+        bounds = SigmaBounds.default() if sigma is None else SigmaBounds(*(np.asarray(b, np.float64) for b in sigma))
+        return trace(self._geometry, self._settings, o, d, self._origin, self.space(bounds))
+
+    def space(self, sigma: SigmaBounds | None = None) -> Space:
+        """The uploaded aberrations and portals as float64 arrays, with the radial bounds to trace by."""
+        return Space(self._boxes, self._portals, sigma or SigmaBounds.default())
 
     @property
     def geometry(self) -> Geometry:
@@ -104,7 +121,8 @@ class ReferenceBackend(Backend):
         start = time.perf_counter()
         directions = camera.primary_directions(width, height).reshape(-1, 3)
         origin = np.asarray(camera.position, dtype=np.float64) - self._origin
-        result = trace(self._geometry, self._settings, origin, directions, self._origin)
+        sigma = SigmaBounds(*camera.sigma_bounds(width / height))
+        result = trace(self._geometry, self._settings, origin, directions, self._origin, self.space(sigma))
         frame = _frame(result, width, height, aovs)
         frame.timings_ms["render"] = (time.perf_counter() - start) * 1e3
         return frame

@@ -1,53 +1,59 @@
-"""The ray's journey (DESIGN.md section 5) and shading (section 4), vectorised over rays in float64.
+"""The ray's journey (DESIGN.md section 5; exact rules in docs/semantics.md), vectorised over rays in float64.
 
 Every ray carries the full state of section 5 as arrays: origin ``o``, world
 direction ``r``, perceived direction ``w``, primary direction ``d0``, the
 active aberration, path length ``L``, perceived length ``Λ``, event count
-``n`` and the surface it is leaving. Each iteration of :func:`trace` finds the
-next event of every live ray (:func:`_next_event`), finishes the rays whose
-event ends them (a mesh hit, a miss) and advances the others (aberration
-faces and portals: the places where those slot in are marked). Rays whose
-count reaches ``max_events`` get the event-limit colour.
+``n`` and the surface it is leaving. Primary rays first take the transition
+into the box that contains the camera (:func:`enter_at_start`). Each
+iteration of :func:`trace` then finds the next event of every live ray
+(:func:`next_event`), finishes the rays whose event ends them (a mesh hit, a
+miss) and advances the others across an aberration face or through a portal
+(:func:`advance`). Rays whose count reaches ``max_events`` get the
+event-limit colour. Finished rays drop out of the live set.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from backends.reference.aberrations import (
+    NO_BOX,
+    Boxes,
+    SigmaBounds,
+    containing_box,
+    nearest_box_faces,
+    perceived_per_world,
+    transition,
+)
+from backends.reference.portals import Portals, nearest_portal_hits, teleport
+from backends.reference.shading import ShadingSettings, shade, to_uint8
 from backends.reference.traverse import Geometry, MeshHits, nearest_mesh_hits
 
-# Event kinds.
+__all__ = ["ShadingSettings", "Space", "TraceResult", "to_uint8", "trace"]
+
+# Event kinds; also the kinds of surface a ray can be leaving (MISS: none).
 MISS, MESH, ABERRATION, PORTAL = 0, 1, 2, 3
-#: No surface (the ``leaving`` id of a ray that starts in free space).
+#: The id of "no surface" (``leaving_id`` of a ray that starts in free space).
 NO_SURFACE = -1
-#: ``t_min`` is this fraction of the origin's magnitude (at least of 1).
+#: ``t_min`` is this fraction of the origin's magnitude (at least of 1): hits at or below it are ignored.
 T_MIN_RELATIVE = 1e-9
+#: Candidates within ``TIE_RELATIVE·max(1, |o| + t)`` of the nearest one count as tied (at least 2·t_min
+#: of the event point, so nothing a tie gives up would be skipped by ``t_min`` after the event).
+TIE_RELATIVE = 2e-9
+#: After an event the active box is looked up this far (relative, at least 1) past the event point along
+#: the ray: beyond every face that ``t_min`` will skip.
+NUDGE_RELATIVE = 1e-8
 
 
 @dataclass(frozen=True)
-class ShadingSettings:
-    """The scene settings the tracer needs, in float64."""
+class Space:
+    """What bends and teleports rays: aberration boxes, portals, and the radial mode's camera bounds."""
 
-    background: np.ndarray  # (3,)
-    light_dir: np.ndarray  # (3,) unit, towards the light
-    event_limit_color: np.ndarray  # (3,)
-    ambient: float
-    max_events: int
-
-    @staticmethod
-    def from_table(settings: np.ndarray) -> ShadingSettings:
-        row = settings[0]
-        light = row["light_dir"][:3].astype(np.float64)
-        norm = np.linalg.norm(light)
-        return ShadingSettings(
-            background=row["background"][:3].astype(np.float64),
-            light_dir=light / norm if norm > 0 else np.array([0.0, 1.0, 0.0]),
-            event_limit_color=row["event_limit_color"][:3].astype(np.float64),
-            ambient=float(row["shading"][0]),
-            max_events=max(1, int(row["counts"][3])),
-        )
+    boxes: Boxes = field(default_factory=Boxes.empty)
+    portals: Portals = field(default_factory=Portals.empty)
+    sigma: SigmaBounds = field(default_factory=SigmaBounds.default)
 
 
 @dataclass
@@ -59,11 +65,12 @@ class RayState:
     r: np.ndarray  # (N, 3) world direction
     w: np.ndarray  # (N, 3) perceived direction (unit)
     d0: np.ndarray  # (N, 3) primary direction (carried through portals)
-    aberration: np.ndarray  # (N,) active aberration row, -1 for none
+    aberration: np.ndarray  # (N,) active aberration row, NO_BOX for none
     length: np.ndarray  # (N,) L
     perceived: np.ndarray  # (N,) Λ
     events: np.ndarray  # (N,) n
-    leaving: np.ndarray  # (N,) id of the surface the ray is leaving, NO_SURFACE for none
+    leaving_kind: np.ndarray  # (N,) MISS (none), ABERRATION (a box face) or PORTAL
+    leaving_id: np.ndarray  # (N,) box face id (6·row + face) or portal row; NO_SURFACE for none
 
     @staticmethod
     def primary(origin: np.ndarray, directions: np.ndarray) -> RayState:
@@ -72,8 +79,9 @@ class RayState:
         d = np.asarray(directions, dtype=np.float64)
         return RayState(
             index=np.arange(n), o=o, r=d.copy(), w=d.copy(), d0=d.copy(),
-            aberration=np.full(n, -1, np.int64), length=np.zeros(n), perceived=np.zeros(n),
-            events=np.zeros(n, np.int64), leaving=np.full(n, NO_SURFACE, np.int64),
+            aberration=np.full(n, NO_BOX, np.int64), length=np.zeros(n), perceived=np.zeros(n),
+            events=np.zeros(n, np.int64), leaving_kind=np.full(n, MISS, np.int64),
+            leaving_id=np.full(n, NO_SURFACE, np.int64),
         )  # fmt: skip
 
     def __len__(self) -> int:
@@ -103,11 +111,17 @@ class TraceResult:
 
 @dataclass(frozen=True)
 class Event:
-    """The next event of each live ray: its kind, distance ``t`` along ``r`` and the mesh hit."""
+    """The next event of each live ray: its kind, distance ``t`` along ``r`` and what was hit."""
 
     kind: np.ndarray  # (N,) MISS / MESH / ABERRATION / PORTAL
     t: np.ndarray
     mesh: MeshHits
+    face: np.ndarray  # (N,) box face id of ABERRATION events
+    portal: np.ndarray  # (N,) portal row of PORTAL events
+
+    def subset(self, rows: np.ndarray) -> Event:
+        mesh = MeshHits(self.mesh.t[rows], self.mesh.instance[rows], self.mesh.triangle[rows], self.mesh.bary[rows])
+        return Event(self.kind[rows], self.t[rows], mesh, self.face[rows], self.portal[rows])
 
 
 def t_min_of(o: np.ndarray) -> np.ndarray:
@@ -115,17 +129,35 @@ def t_min_of(o: np.ndarray) -> np.ndarray:
     return T_MIN_RELATIVE * np.maximum(1.0, np.linalg.norm(o, axis=1))
 
 
+def tie_window(o: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Candidates this close to the nearest (at ``t``) are tied with it; ``|o| + t`` bounds the event point's size."""
+    return TIE_RELATIVE * np.maximum(1.0, np.linalg.norm(o, axis=1) + t)
+
+
+def nudge_of(o: np.ndarray) -> np.ndarray:
+    """How far past an event point the active box is looked up (world units along the ray)."""
+    return NUDGE_RELATIVE * np.maximum(1.0, np.linalg.norm(o, axis=1))
+
+
 def trace(
-    geo: Geometry, settings: ShadingSettings, origin: np.ndarray, directions: np.ndarray, world_origin: np.ndarray
+    geo: Geometry,
+    settings: ShadingSettings,
+    origin: np.ndarray,
+    directions: np.ndarray,
+    world_origin: np.ndarray,
+    space: Space | None = None,
 ) -> TraceResult:
     """Trace primary rays from ``origin`` (packed coordinates) along unit ``directions`` (N, 3).
 
     ``world_origin`` is the packed origin, added back where world coordinates
-    matter (the triplanar checker).
+    matter (the triplanar checker). ``space`` holds the aberrations and portals
+    (none when omitted).
     """
+    space = space or Space()
     result = TraceResult.empty(len(directions), settings.background)
     state = RayState.primary(origin, directions)
     with np.errstate(all="ignore"):
+        enter_at_start(space, state)
         while len(state):
             limited = state.events >= settings.max_events
             if np.any(limited):
@@ -133,53 +165,89 @@ def trace(
                 state = state.subset(np.flatnonzero(~limited))
                 if not len(state):
                     break
-            event = _next_event(geo, state)
+            event = next_event(geo, space, state)
             missed = event.kind == MISS
             _finish_miss(state.subset(np.flatnonzero(missed)), result)
             hit = np.flatnonzero(event.kind == MESH)
             if hit.size:
-                _finish_mesh(geo, settings, state.subset(hit), _subset_hits(event.mesh, hit), world_origin, result)
+                _finish_mesh(geo, settings, space, state.subset(hit), event.mesh, hit, world_origin, result)
             moving = np.flatnonzero((event.kind == ABERRATION) | (event.kind == PORTAL))
-            state = _advance(state.subset(moving), event.kind[moving], event.t[moving])
+            state = advance(space, state.subset(moving), event.subset(moving))
     return result
 
 
-def _next_event(geo: Geometry, state: RayState) -> Event:
-    """The nearest of: a mesh triangle, an aberration face, a portal quad.
+def enter_at_start(space: Space, state: RayState) -> None:
+    """Primary rays take the transition from no box into the box at the camera (looked up just along each ray)."""
+    if not len(space.boxes):
+        return
+    start = containing_box(space.boxes, state.o + nudge_of(state.o)[:, None] * state.r)
+    state.w, state.r = transition(space.boxes, space.sigma, state.aberration, start, state.w, state.r, state.d0)
+    state.aberration = start
 
-    Only meshes exist in this backend so far. Aberration faces and portals
-    will be intersected here too (each skipping ``state.leaving`` by id) and
-    compete for the smallest ``t``; their kind then replaces MESH/MISS. A mesh
-    hit ends the ray, so no mesh is ever the surface being left.
+
+def next_event(geo: Geometry, space: Space, state: RayState) -> Event:
+    """The nearest of a linked portal quad, a mesh triangle and an aberration box face along ``r``.
+
+    Each search skips hits with ``t <= t_min`` and the surface the ray is
+    leaving. Candidates within :func:`tie_window` of the nearest are tied and
+    resolved portal, then mesh, then box face: a door flush with a wall shows
+    the portal, and a wall flush with a box face is hit rather than skipped
+    (after a box-face event, ``t_min`` would skip the wall and the ray would
+    pass through it). The mesh search is cut off where it can no longer win.
     """
     t_min = t_min_of(state.o)
-    mesh = nearest_mesh_hits(geo, state.o, state.r, t_min)
-    kind = np.where(np.isfinite(mesh.t), MESH, MISS)
-    # Aberration faces (DESIGN.md section 6) and portal quads (section 7) slot in here.
-    return Event(kind, mesh.t, mesh)
+    skip_face = np.where(state.leaving_kind == ABERRATION, state.leaving_id, NO_SURFACE)
+    skip_portal = np.where(state.leaving_kind == PORTAL, state.leaving_id, NO_SURFACE)
+    t_portal, portal = nearest_portal_hits(space.portals, state.o, state.r, t_min, skip_portal)
+    t_box, face = nearest_box_faces(space.boxes, state.o, state.r, t_min, skip_face)
+    t_max = np.minimum(t_portal, t_box + tie_window(state.o, t_box))
+    mesh = nearest_mesh_hits(geo, state.o, state.r, t_min, t_max)
+    nearest = np.minimum(np.minimum(t_portal, mesh.t), t_box)
+    limit = nearest + tie_window(state.o, nearest)
+    found = np.isfinite(nearest)
+    kind = np.full(len(state), MISS, np.int64)
+    t = np.full(len(state), np.inf)
+    for candidate, t_candidate in ((ABERRATION, t_box), (MESH, mesh.t), (PORTAL, t_portal)):  # lowest precedence first
+        wins = found & (t_candidate <= limit)
+        kind, t = np.where(wins, candidate, kind), np.where(wins, t_candidate, t)
+    return Event(kind, t, mesh, face, portal)
 
 
-def _advance(state: RayState, kind: np.ndarray, t: np.ndarray) -> RayState:
-    """Move rays across an aberration face or through a portal; ``n += 1``.
+def advance(space: Space, state: RayState, event: Event) -> RayState:
+    """Move rays to their box face or portal, add the segment to L and Λ, apply the event; ``n += 1``.
 
-    Not reachable yet (no aberration or portal events are produced); kept so
-    the loop's structure is the final one.
+    A box face: the ray stays at the face point and is leaving that face. A
+    portal: the ray continues from the target quad (:func:`teleport`) and is
+    leaving it. Either way the active box is then looked up just past the new
+    origin along ``r`` and the transition rule updates ``w`` and ``r``.
     """
-    step = t * np.linalg.norm(state.r, axis=1)
-    state.o = state.o + t[:, None] * state.r
+    if not len(state):
+        return state
+    step = event.t * np.linalg.norm(state.r, axis=1)
     state.length = state.length + step
-    state.perceived = state.perceived + step * _perceived_per_world(state)
+    state.perceived = state.perceived + step * perceived_per_world(space.boxes, state.aberration, state.w)
+    state.o = state.o + event.t[:, None] * state.r
     state.events = state.events + 1
+    crossing = event.kind == ABERRATION
+    state.leaving_kind = np.where(crossing, ABERRATION, PORTAL)
+    state.leaving_id = np.where(crossing, event.face, event.portal)
+    through = np.flatnonzero(event.kind == PORTAL)
+    if through.size:
+        o, r, w, d0, arrival = teleport(
+            space.portals,
+            event.portal[through],
+            state.o[through],
+            state.r[through],
+            state.w[through],
+            state.d0[through],
+        )
+        state.o[through], state.r[through], state.w[through], state.d0[through] = o, r, w, d0
+        state.leaving_id[through] = arrival
+    if len(space.boxes):
+        active = containing_box(space.boxes, state.o + nudge_of(state.o)[:, None] * state.r)
+        state.w, state.r = transition(space.boxes, space.sigma, state.aberration, active, state.w, state.r, state.d0)
+        state.aberration = active
     return state
-
-
-def _perceived_per_world(state: RayState) -> np.ndarray:
-    """Perceived length per world length along ``r``: 1 outside every aberration box."""
-    return np.ones(len(state))
-
-
-def _subset_hits(hits: MeshHits, rows: np.ndarray) -> MeshHits:
-    return MeshHits(hits.t[rows], hits.instance[rows], hits.triangle[rows], hits.bary[rows])
 
 
 def _finish_limit(state: RayState, settings: ShadingSettings, out: TraceResult) -> None:
@@ -196,72 +264,19 @@ def _finish_miss(state: RayState, out: TraceResult) -> None:
 def _finish_mesh(
     geo: Geometry,
     settings: ShadingSettings,
+    space: Space,
     state: RayState,
-    hits: MeshHits,
+    mesh: MeshHits,
+    rows: np.ndarray,
     world_origin: np.ndarray,
     out: TraceResult,
 ) -> None:
-    """Shade mesh hits and record L, Λ, entity id and event count."""
+    """Shade mesh hits and record L, Λ, entity id and event count (``rows`` select the hits of ``mesh``)."""
+    hits = MeshHits(mesh.t[rows], mesh.instance[rows], mesh.triangle[rows], mesh.bary[rows])
     step = hits.t * np.linalg.norm(state.r, axis=1)
     position = state.o + hits.t[:, None] * state.r
     out.color[state.index] = shade(geo, settings, hits, state.r, position + world_origin)
     out.depth[state.index] = state.length + step
-    out.perceived[state.index] = state.perceived + step * _perceived_per_world(state)
+    out.perceived[state.index] = state.perceived + step * perceived_per_world(space.boxes, state.aberration, state.w)
     out.instance[state.index] = geo.entity[hits.instance]
     out.events[state.index] = state.events
-
-
-def world_normals(geo: Geometry, instance: np.ndarray, triangle: np.ndarray) -> np.ndarray:
-    """Unit geometric normals in world space: object normals through the inverse transpose."""
-    n_obj = np.cross(geo.v1[triangle] - geo.v0[triangle], geo.v2[triangle] - geo.v0[triangle])
-    linear = geo.world_to_object[instance][:, :, :3]
-    n = np.einsum("nji,nj->ni", linear, n_obj)
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0)
-
-
-def shade(
-    geo: Geometry, settings: ShadingSettings, hits: MeshHits, direction: np.ndarray, world_position: np.ndarray
-) -> np.ndarray:
-    """``base · checker · (ambient + (1 − ambient)·max(0, n·l))`` with n turned to face the ray."""
-    n = world_normals(geo, hits.instance, hits.triangle)
-    n = np.where(np.sum(n * direction, axis=1, keepdims=True) > 0.0, -n, n)
-    lambert = np.maximum(0.0, n @ settings.light_dir)
-    material = geo.material[hits.instance]
-    base = geo.color[material, :3]
-    cell = geo.color[material, 3]
-    factor = checker_factor(geo, hits, n, world_position, cell)
-    color = base * (factor * (settings.ambient + (1.0 - settings.ambient) * lambert))[:, None]
-    return np.where(np.isfinite(color), color, 0.0)
-
-
-def checker_factor(
-    geo: Geometry, hits: MeshHits, normal: np.ndarray, world_position: np.ndarray, cell: np.ndarray
-) -> np.ndarray:
-    """1 in even cells, 0.5 in odd ones: UV cells when the asset has UVs, else world triplanar.
-
-    Triplanar uses the two world axes other than the dominant axis of the
-    normal. Parity is ``(floor(a/c) + floor(b/c)) mod 2``; 1 (odd) is dark.
-    """
-    factor = np.ones(len(cell))
-    on = cell > 0.0
-    if not np.any(on):
-        return factor
-    rows = np.flatnonzero(on)
-    has_uv = (geo.flags[hits.instance[rows]] & 1) != 0
-    uv = np.einsum("nk,nkj->nj", hits.bary[rows], geo.uv[hits.triangle[rows]])
-    axis = np.argmax(np.abs(normal[rows]), axis=1)
-    p = world_position[rows]
-    k = np.arange(len(rows))
-    a = np.where(has_uv, uv[:, 0], p[k, (axis + 1) % 3])
-    b = np.where(has_uv, uv[:, 1], p[k, (axis + 2) % 3])
-    c = cell[rows]
-    parity = np.mod(np.floor(a / c) + np.floor(b / c), 2.0)
-    factor[rows] = np.where(parity == 1.0, 0.5, 1.0)
-    return factor
-
-
-def to_uint8(color: np.ndarray) -> np.ndarray:
-    """``round(clip(c, 0, 1) · 255)``, halves rounded up (``floor(x + 0.5)``, the same on every backend)."""
-    c = np.where(np.isfinite(color), color, 0.0)
-    return np.floor(np.clip(c, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)

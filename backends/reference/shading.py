@@ -1,0 +1,89 @@
+"""Shading (DESIGN.md section 4) of mesh hits, and the colour quantisation every backend shares."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from backends.reference.traverse import Geometry, MeshHits
+
+
+@dataclass(frozen=True)
+class ShadingSettings:
+    """The scene settings the tracer needs, in float64."""
+
+    background: np.ndarray  # (3,)
+    light_dir: np.ndarray  # (3,) unit, towards the light
+    event_limit_color: np.ndarray  # (3,)
+    ambient: float
+    max_events: int
+
+    @staticmethod
+    def from_table(settings: np.ndarray) -> ShadingSettings:
+        row = settings[0]
+        light = row["light_dir"][:3].astype(np.float64)
+        norm = np.linalg.norm(light)
+        return ShadingSettings(
+            background=row["background"][:3].astype(np.float64),
+            light_dir=light / norm if norm > 0 else np.array([0.0, 1.0, 0.0]),
+            event_limit_color=row["event_limit_color"][:3].astype(np.float64),
+            ambient=float(row["shading"][0]),
+            max_events=max(1, int(row["counts"][3])),
+        )
+
+
+def world_normals(geo: Geometry, instance: np.ndarray, triangle: np.ndarray) -> np.ndarray:
+    """Unit geometric normals in world space: object normals through the inverse transpose."""
+    n_obj = np.cross(geo.v1[triangle] - geo.v0[triangle], geo.v2[triangle] - geo.v0[triangle])
+    linear = geo.world_to_object[instance][:, :, :3]
+    n = np.einsum("nji,nj->ni", linear, n_obj)
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(norm > 0, n / np.where(norm > 0, norm, 1.0), 0.0)
+
+
+def shade(
+    geo: Geometry, settings: ShadingSettings, hits: MeshHits, direction: np.ndarray, world_position: np.ndarray
+) -> np.ndarray:
+    """``base · checker · (ambient + (1 − ambient)·max(0, n·l))`` with n turned to face the ray."""
+    n = world_normals(geo, hits.instance, hits.triangle)
+    n = np.where(np.sum(n * direction, axis=1, keepdims=True) > 0.0, -n, n)
+    lambert = np.maximum(0.0, n @ settings.light_dir)
+    material = geo.material[hits.instance]
+    base = geo.color[material, :3]
+    cell = geo.color[material, 3]
+    factor = checker_factor(geo, hits, n, world_position, cell)
+    color = base * (factor * (settings.ambient + (1.0 - settings.ambient) * lambert))[:, None]
+    return np.where(np.isfinite(color), color, 0.0)
+
+
+def checker_factor(
+    geo: Geometry, hits: MeshHits, normal: np.ndarray, world_position: np.ndarray, cell: np.ndarray
+) -> np.ndarray:
+    """1 in even cells, 0.5 in odd ones: UV cells when the asset has UVs, else world triplanar.
+
+    Triplanar uses the two world axes other than the dominant axis of the
+    normal. Parity is ``(floor(a/c) + floor(b/c)) mod 2``; 1 (odd) is dark.
+    """
+    factor = np.ones(len(cell))
+    on = cell > 0.0
+    if not np.any(on):
+        return factor
+    rows = np.flatnonzero(on)
+    has_uv = (geo.flags[hits.instance[rows]] & 1) != 0
+    uv = np.einsum("nk,nkj->nj", hits.bary[rows], geo.uv[hits.triangle[rows]])
+    axis = np.argmax(np.abs(normal[rows]), axis=1)
+    p = world_position[rows]
+    k = np.arange(len(rows))
+    a = np.where(has_uv, uv[:, 0], p[k, (axis + 1) % 3])
+    b = np.where(has_uv, uv[:, 1], p[k, (axis + 2) % 3])
+    c = cell[rows]
+    parity = np.mod(np.floor(a / c) + np.floor(b / c), 2.0)
+    factor[rows] = np.where(parity == 1.0, 0.5, 1.0)
+    return factor
+
+
+def to_uint8(color: np.ndarray) -> np.ndarray:
+    """``round(clip(c, 0, 1) · 255)``, halves rounded up (``floor(x + 0.5)``, the same on every backend)."""
+    c = np.where(np.isfinite(color), color, 0.0)
+    return np.floor(np.clip(c, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
