@@ -2,7 +2,7 @@
 
 Every table the tracers read is a NumPy structured dtype whose bytes go
 unchanged into a std430 shader storage buffer and an OpenCL buffer. The
-kernels declare the same records in ``backends/kernels/layout.h`` built from
+kernels declare the same records in ``backends/shared/layout.h`` built from
 4-component vectors only (``real4`` / ``int4``), which is the subset on which
 std430 and OpenCL C agree. Tests assert offsets and sizes against the std430
 rules, so a drift between host and kernel is caught on the host.

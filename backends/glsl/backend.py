@@ -1,0 +1,452 @@
+"""The GLSL compute-shader backend (moderngl): the shared tracer core in an OpenGL 4.3 compute shader.
+
+Headless it runs on an EGL standalone context (Mesa llvmpipe here, any GPU
+elsewhere); the editor can hand it its own context so the colour texture is
+drawable without a read-back. The packed tables go unchanged into one std430
+storage buffer each (binding = position in :data:`engine.layout.TABLES`), or,
+on Mesa's llvmpipe, into one RGBA32UI image each (the same bytes, a texel per
+4-vector): llvmpipe reads storage buffers one SIMD lane at a time and images
+with vector gathers, about 13 times faster (``tables="auto"`` picks). The
+shader is assembled from ``#version 430`` + defines + ``prelude.glsl`` + the
+shared ``layout.h`` + ``bindings.glsl`` + the shared ``core.h`` +
+``main.comp``; every variant (scene features, requested AOVs, precision,
+table store) is compiled once per context and cached.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager, nullcontext
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
+
+import numpy as np
+
+from backends import shared
+from backends.base import AOVS, Backend, Frame
+from engine import layout
+from engine.errors import AberrantError, BackendUnavailable
+from engine.layout import Precision
+from engine.packing import CameraView, Features, PackedScene, TableUpdate, pack_camera
+
+if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
+    import moderngl
+
+#: What to install when no OpenGL 4.3 context can be made (Debian names).
+INSTALL_HINT = (
+    "install Mesa's EGL and OpenGL drivers (apt-get install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri) "
+    "and moderngl (pip install 'aberrant[glsl]')"
+)
+
+#: Storage-buffer bindings after the scene tables.
+CAMERA_BINDING = len(layout.TABLES)
+OUTPUT_BINDINGS: dict[str, int] = {
+    "depth": CAMERA_BINDING + 1,
+    "perceived": CAMERA_BINDING + 2,
+    "instance": CAMERA_BINDING + 3,
+    "events": CAMERA_BINDING + 4,
+}
+#: Bytes per pixel and read-back dtype of each storage-buffer AOV.
+_OUTPUT_DTYPES: dict[str, np.dtype] = {
+    "depth": np.dtype(np.float32),
+    "perceived": np.dtype(np.float32),
+    "instance": np.dtype(np.int32),
+    "events": np.dtype(np.uint32),
+}
+#: Image-mode tables: texels per image row (a power of two; llvmpipe allows 16384).
+TABLE_WIDTH = 4096
+#: Image units: 0 the colour output, k + 1 table k, then the camera.
+CAMERA_IMAGE = len(layout.TABLES) + 1
+#: CPU renderers: storage-buffer loads slow enough to keep the tables in images instead.
+_SOFTWARE_RENDERERS = ("llvmpipe", "softpipe")
+
+TableStore = Literal["auto", "ssbo", "image"]
+#: Shader source files, in assembly order (package, name).
+_SOURCES: tuple[tuple[str, str], ...] = (
+    ("backends.glsl", "prelude.glsl"),
+    ("backends.shared", "layout.h"),
+    ("backends.glsl", "bindings.glsl"),
+    ("backends.shared", "core.h"),
+    ("backends.glsl", "main.comp"),
+)
+
+
+def _create_context() -> moderngl.Context:
+    import moderngl
+
+    return moderngl.create_standalone_context(backend="egl", require=430)
+
+
+def _write_texels(image: moderngl.Texture, first: int, texels: np.ndarray) -> None:
+    """Write consecutive texels from index ``first`` (row-major, TABLE_WIDTH per row): at most three writes."""
+    width = image.size[0]
+    pos, end = first, first + len(texels)
+    while pos < end:
+        x, y = pos % width, pos // width
+        if x == 0 and end - pos >= width:
+            count = (end - pos) // width * width
+            viewport = (0, y, width, count // width)
+        else:
+            count = min(width - x, end - pos)
+            viewport = (x, y, count, 1)
+        image.write(texels[pos - first : pos - first + count], viewport=viewport, alignment=1)
+        pos += count
+
+
+class GlslBackend(Backend):
+    """Traces with the shared core in an OpenGL 4.3 compute shader (moderngl)."""
+
+    name: ClassVar[str] = "glsl"
+    precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
+    camera_relative: ClassVar[bool] = True
+
+    #: Process-wide probe result: ``(reason,)`` once probed.
+    _probe_cache: ClassVar[tuple[str | None] | None] = None
+
+    def __init__(
+        self,
+        precision: Precision | None = None,
+        *,
+        context: moderngl.Context | None = None,
+        workgroup: tuple[int, int] = (8, 8),
+        tables: TableStore = "auto",
+    ) -> None:
+        """``context``: draw into an existing context (the editor's), else a headless EGL one is made;
+        ``tables``: storage buffers or images for the packed tables (``auto``: images on llvmpipe)."""
+        super().__init__(precision)
+        if context is None:
+            reason = self.probe()
+            if reason is not None:
+                raise BackendUnavailable(f"glsl backend cannot run here: {reason}")
+        self._owns_context = context is None
+        if context is None:
+            try:
+                context = _create_context()
+            except Exception as e:  # the probe passed, yet no context now: say so, do not crash the caller
+                raise BackendUnavailable(f"glsl backend cannot create an OpenGL 4.3 context: {e}") from e
+        self._ctx: moderngl.Context | None = context
+        self.workgroup = (int(workgroup[0]), int(workgroup[1]))
+        if tables not in ("auto", "ssbo", "image"):
+            raise AberrantError(f"glsl backend: tables must be 'auto', 'ssbo' or 'image', got {tables!r}")
+        renderer = str(self._ctx.info.get("GL_RENDERER", "")).lower()
+        #: A CPU rasteriser (llvmpipe): storage-buffer loads go one SIMD lane at a time, and the
+        #: compiler flattens small branches, so rare-case code costs every lane.
+        self.software = any(name in renderer for name in _SOFTWARE_RENDERERS)
+        if tables == "auto":
+            tables = "image" if self.software else "ssbo"
+        #: Where the tables live on the device: ``"ssbo"`` or ``"image"``.
+        self.table_store: str = tables
+        self._tables: dict[str, moderngl.Buffer | moderngl.Texture] = {}
+        self._table_bytes: dict[str, int] = {}
+        self._counts: dict[str, int] = {}
+        self._origin = np.zeros(3)
+        self._features = Features()
+        self._stack = shared.MIN_STACK
+        self._uploaded = False
+        with self._current():
+            camera_bytes = layout.camera_dtype(self.precision).itemsize
+            if self.table_store == "image":
+                self._camera: moderngl.Buffer | moderngl.Texture = self._image(camera_bytes // 16)
+            else:
+                self._camera = self._ctx.buffer(reserve=camera_bytes)
+        self._outputs: dict[str, moderngl.Buffer] = {}
+        self._texture: moderngl.Texture | None = None
+        self._size: tuple[int, int] = (0, 0)
+        self._programs: dict[tuple[tuple[str, int], ...], moderngl.ComputeShader] = {}
+        #: How many shader variants this backend has compiled (tests check the cache).
+        self.compile_count = 0
+        #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
+        self.extra_defines: dict[str, int] = {}
+
+    # --- availability ---------------------------------------------------------------
+
+    @classmethod
+    def probe(cls) -> str | None:
+        """``None`` when a headless OpenGL 4.3 context with compute shaders can be made (cached per process)."""
+        if cls._probe_cache is None:
+            cls._probe_cache = (cls._probe_uncached(),)
+        return cls._probe_cache[0]
+
+    @staticmethod
+    def _probe_uncached() -> str | None:
+        try:
+            import moderngl  # noqa: F401
+        except ImportError as e:
+            return f"moderngl is not installed ({e}); pip install 'aberrant[glsl]'"
+        try:
+            ctx = _create_context()
+        except Exception as e:  # glcontext raises plain Exceptions naming the failed EGL call
+            return f"no headless OpenGL 4.3 context through EGL ({type(e).__name__}: {e}); {INSTALL_HINT}"
+        try:
+            if ctx.version_code < 430:
+                return f"OpenGL {ctx.version_code / 100:.1f} is too old (compute shaders need 4.3); {INSTALL_HINT}"
+        finally:
+            ctx.release()
+        return None
+
+    def info(self) -> dict[str, str]:
+        """Renderer, version, vendor and compute limits (``aberrant backends``)."""
+        ctx = self._context()
+        with self._current():
+            gl = ctx.info
+            return {
+                "renderer": str(gl.get("GL_RENDERER", "?")),
+                "version": str(gl.get("GL_VERSION", "?")),
+                "vendor": str(gl.get("GL_VENDOR", "?")),
+                "max compute work-group size": "x".join(str(v) for v in gl.get("GL_MAX_COMPUTE_WORK_GROUP_SIZE", ())),
+                "max compute work-group invocations": str(gl.get("GL_MAX_COMPUTE_WORK_GROUP_INVOCATIONS", "?")),
+                "precision": self.precision,
+                "work group": f"{self.workgroup[0]}x{self.workgroup[1]}",
+                "tables": "RGBA32UI images" if self.table_store == "image" else "storage buffers",
+            }
+
+    # --- context ---------------------------------------------------------------------
+
+    def _context(self) -> moderngl.Context:
+        if self._ctx is None:
+            raise AberrantError("glsl backend: used after release()")
+        return self._ctx
+
+    @contextmanager
+    def _current(self) -> Iterator[None]:
+        """Make our own context current for the block (several backends may live in one process)."""
+        ctx = self._context()
+        with ctx if self._owns_context else nullcontext():
+            yield
+
+    @property
+    def context(self) -> moderngl.Context:
+        """The OpenGL context the backend draws with."""
+        return self._context()
+
+    @property
+    def color_texture(self) -> moderngl.Texture | None:
+        """The last frame's colour as an RGBA8 texture, texel row 0 = the image's top row (None before a frame)."""
+        return self._texture
+
+    # --- upload ----------------------------------------------------------------------
+
+    def upload(self, packed: PackedScene, updates: Sequence[TableUpdate]) -> int:
+        """Write changed rows into the storage buffers (reallocating only on a size change); returns bytes."""
+        if packed.precision != self.precision:
+            raise AberrantError(
+                f"glsl backend traces at {self.precision} but the scene was packed at {packed.precision}"
+            )
+        written = 0
+        todo = list(updates)
+        listed = {u.table for u in todo}
+        todo += [TableUpdate(name) for name in layout.TABLES if name not in self._tables and name not in listed]
+        with self._current():
+            for update in todo:
+                table = np.ascontiguousarray(packed.tables[update.table])
+                whole = (
+                    update.rows is None
+                    or update.table not in self._tables
+                    or self._table_bytes[update.table] != table.nbytes
+                )
+                if whole:
+                    self._write_whole(update.table, table)
+                    written += table.nbytes
+                else:
+                    assert update.rows is not None
+                    written += self._write_rows(update.table, table, update.rows)
+                if update.table == "bvh_nodes" and whole:
+                    self._stack = shared.stack_size(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+        self._counts = dict(packed.counts)
+        self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
+        self._features = packed.features
+        self._uploaded = True
+        return written
+
+    def _image(self, texels: int) -> moderngl.Texture:
+        """An RGBA32UI image of TABLE_WIDTH-texel rows holding at least ``texels`` texels."""
+        import moderngl
+
+        rows = max(1, -(-texels // TABLE_WIDTH))
+        texture = self._context().texture((TABLE_WIDTH, rows), 4, dtype="u4")
+        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)  # integer textures are complete only so
+        return texture
+
+    def _write_whole(self, name: str, table: np.ndarray) -> None:
+        """Write a whole table, in place when its size is unchanged, else into a new buffer or image."""
+        old = self._tables.get(name)
+        same = old is not None and self._table_bytes.get(name) == table.nbytes
+        if self.table_store == "image":
+            texels = table.nbytes // 16
+            if not same:
+                if old is not None:
+                    old.release()
+                old = self._tables[name] = self._image(texels)
+            assert old is not None
+            width, rows = old.size
+            data = np.zeros((rows * width, 4), np.uint32)
+            data[:texels] = table.view(np.uint32).reshape(-1, 4)
+            old.write(data)
+        elif same:
+            assert old is not None
+            old.write(table)
+        else:
+            if old is not None:
+                old.release()
+            self._tables[name] = self._context().buffer(table)
+        self._table_bytes[name] = table.nbytes
+
+    def _write_rows(self, name: str, table: np.ndarray, rows: range) -> int:
+        """Write rows ``[start, stop)`` only; returns the bytes written."""
+        part = table[rows.start : rows.stop]
+        target = self._tables[name]
+        if self.table_store != "image":
+            target.write(part, offset=rows.start * table.dtype.itemsize)
+            return part.nbytes
+        stride = table.dtype.itemsize // 16
+        _write_texels(target, rows.start * stride, part.view(np.uint32).reshape(-1, 4))
+        return part.nbytes
+
+    def read_table(self, name: str) -> bytes:
+        """The bytes of an uploaded table as the device holds them (tests, debugging)."""
+        store = self._tables.get(name)
+        if store is None:
+            raise AberrantError(f"glsl backend: table {name!r} has not been uploaded")
+        with self._current():
+            data = store.read(alignment=1) if self.table_store == "image" else store.read()
+        return data[: self._table_bytes[name]]
+
+    # --- shaders ---------------------------------------------------------------------
+
+    def _defines(self, aovs: Sequence[str]) -> dict[str, int]:
+        defines: dict[str, int] = dict(self._features.defines())
+        defines.update(
+            REAL_IS_DOUBLE=int(self.precision == "f64"),
+            # Exact signs for edge functions that are exactly 0 in float (doubles are core in GLSL 4.00+).
+            # Not needed for watertightness (a float edge function has the exact sign or is 0, and 0
+            # counts on both sides of a shared edge); skipped on llvmpipe, where it costs about 5 %.
+            EDGE_FALLBACK_FP64=int(not self.software),
+            WORLD_FP64=1,
+            BVH_STACK_SIZE=self._stack,
+            WORKGROUP_X=self.workgroup[0],
+            WORKGROUP_Y=self.workgroup[1],
+            CAMERA_BINDING=CAMERA_BINDING,
+            TABLES_IN_IMAGES=int(self.table_store == "image"),
+            TABLE_WIDTH=TABLE_WIDTH,
+            TABLE_WIDTH_LOG2=TABLE_WIDTH.bit_length() - 1,
+            CAMERA_IMAGE=CAMERA_IMAGE,
+        )
+        for name in layout.TABLES:
+            defines[f"{name.upper()}_STRIDE"] = layout.table_dtype(name, self.precision).itemsize // 16
+        for name, binding in OUTPUT_BINDINGS.items():
+            defines[f"{name.upper()}_BINDING"] = binding
+            defines[f"WRITE_{name.upper()}"] = int(name in aovs)
+        defines.update(self.extra_defines)
+        return defines
+
+    @staticmethod
+    def source(defines: dict[str, int]) -> str:
+        """The full compute-shader source of one variant."""
+        return shared.assemble("#version 430\n", defines, _SOURCES)
+
+    def _program(self, defines: dict[str, int]) -> moderngl.ComputeShader:
+        key = tuple(sorted(defines.items()))
+        program = self._programs.get(key)
+        if program is None:
+            source = self.source(defines)
+            try:
+                program = self._context().compute_shader(source)
+            except Exception as e:  # moderngl.Error carries the driver's compile log
+                raise AberrantError(f"glsl backend: the compute shader does not compile: {e}") from e
+            self._programs[key] = program
+            self.compile_count += 1
+        return program
+
+    # --- render ----------------------------------------------------------------------
+
+    def _ensure_outputs(self, width: int, height: int, aovs: Sequence[str]) -> None:
+        """(Re)allocate the colour texture and the requested AOV buffers only when the size changes."""
+        ctx = self._context()
+        if self._size != (width, height):
+            for buffer in self._outputs.values():
+                buffer.release()
+            self._outputs.clear()
+            if self._texture is not None:
+                self._texture.release()
+            self._texture = ctx.texture((width, height), 4, dtype="f1")
+            self._size = (width, height)
+        for name in aovs:
+            if name in OUTPUT_BINDINGS and name not in self._outputs:
+                self._outputs[name] = ctx.buffer(reserve=width * height * _OUTPUT_DTYPES[name].itemsize)
+
+    def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
+        """Dispatch one frame; reads back only the requested AOVs (``aovs=()``: the texture only)."""
+        if not self._uploaded:
+            raise AberrantError("glsl backend: render() before upload(); upload a packed scene first")
+        unknown = [a for a in aovs if a not in AOVS]
+        if unknown:
+            raise AberrantError(f"unknown AOV(s) {', '.join(map(repr, unknown))}; AOVs are {', '.join(AOVS)}")
+        width, height = int(width), int(height)
+        if width <= 0 or height <= 0:
+            raise AberrantError(f"image size must be positive, got {width}x{height}")
+        unsupported = shared.unsupported(self._features)
+        if unsupported:
+            raise BackendUnavailable(f"the glsl backend does not trace {unsupported} yet; use the reference backend")
+        start = time.perf_counter()
+        with self._current():
+            ctx = self._context()
+            self._ensure_outputs(width, height, aovs)
+            program = self._program(self._defines(aovs))
+            row = pack_camera(camera, self._origin, self.precision, width, height)
+            if self.table_store == "image":
+                _write_texels(self._camera, 0, row.view(np.uint32).reshape(-1, 4))
+                for unit, name in enumerate(layout.TABLES, start=1):
+                    self._tables[name].bind_to_image(unit, read=True, write=False)
+                self._camera.bind_to_image(CAMERA_IMAGE, read=True, write=False)
+            else:
+                self._camera.write(row)
+                for binding, name in enumerate(layout.TABLES):
+                    self._tables[name].bind_to_storage_buffer(binding)
+                self._camera.bind_to_storage_buffer(CAMERA_BINDING)
+            for name in aovs:
+                if name in OUTPUT_BINDINGS:
+                    self._outputs[name].bind_to_storage_buffer(OUTPUT_BINDINGS[name])
+            assert self._texture is not None
+            self._texture.bind_to_image(0, read=False, write=True)
+            gx, gy = self.workgroup
+            program.run(math.ceil(width / gx), math.ceil(height / gy), 1)
+            ctx.memory_barrier()
+            dispatched = time.perf_counter()
+            frame = Frame(width, height)
+            if "color" in aovs:
+                data = self._texture.read(alignment=1)
+                frame.color = np.frombuffer(data, np.uint8).reshape(height, width, 4).copy()
+            for name in aovs:
+                if name not in OUTPUT_BINDINGS:
+                    continue
+                raw = np.frombuffer(self._outputs[name].read(), _OUTPUT_DTYPES[name]).reshape(height, width)
+                value: Any = raw.astype(np.uint8) if name == "events" else raw.copy()
+                setattr(frame, name, value)
+        end = time.perf_counter()
+        frame.timings_ms["dispatch"] = (dispatched - start) * 1e3
+        frame.timings_ms["readback"] = (end - dispatched) * 1e3
+        frame.timings_ms["render"] = (end - start) * 1e3
+        return frame
+
+    # --- teardown ----------------------------------------------------------------------
+
+    def release(self) -> None:
+        """Free buffers, programs, the texture and (when it is ours) the context; idempotent."""
+        if self._ctx is None:
+            return
+        with self._current():
+            for resource in [*self._tables.values(), *self._outputs.values(), *self._programs.values()]:
+                resource.release()
+            self._camera.release()
+            if self._texture is not None:
+                self._texture.release()
+        self._tables.clear()
+        self._table_bytes.clear()
+        self._outputs.clear()
+        self._programs.clear()
+        self._texture = None
+        if self._owns_context:
+            self._ctx.release()
+        self._ctx = None
+        self._uploaded = False

@@ -1,0 +1,47 @@
+/* main.comp -- the GLSL compute entry point (after prelude, layout.h, bindings.glsl, core.h).
+ *
+ * One invocation per pixel. The colour always goes to an rgba8 image (the
+ * editor draws it without a read-back; texel row 0 is the image's top row);
+ * the other AOVs go to storage buffers, each compiled in only when requested.
+ */
+
+layout(local_size_x = WORKGROUP_X, local_size_y = WORKGROUP_Y, local_size_z = 1) in;
+
+layout(rgba8, binding = 0) writeonly restrict uniform image2D color_image;
+#if WRITE_DEPTH
+layout(std430, binding = DEPTH_BINDING) writeonly restrict buffer DepthOut { float depth_out[]; };
+#endif
+#if WRITE_PERCEIVED
+layout(std430, binding = PERCEIVED_BINDING) writeonly restrict buffer PerceivedOut { float perceived_out[]; };
+#endif
+#if WRITE_INSTANCE
+layout(std430, binding = INSTANCE_BINDING) writeonly restrict buffer InstanceOut { int instance_out[]; };
+#endif
+#if WRITE_EVENTS
+layout(std430, binding = EVENTS_BINDING) writeonly restrict buffer EventsOut { uint events_out[]; };
+#endif
+
+void main()
+{
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    Camera cam = CAMERA_ROW;
+    if (p.x >= cam.size.x || p.y >= cam.size.y) {
+        return;
+    }
+    Pixel px = trace_pixel(cam, p.x, p.y);
+    int index = p.y * cam.size.x + p.x;
+    /* Exact: the unorm8 conversion of q / 255 rounds back to the integer q. */
+    imageStore(color_image, p, px.color * (1.0 / 255.0));
+#if WRITE_DEPTH
+    depth_out[index] = px.depth;
+#endif
+#if WRITE_PERCEIVED
+    perceived_out[index] = px.perceived;
+#endif
+#if WRITE_INSTANCE
+    instance_out[index] = px.instance;
+#endif
+#if WRITE_EVENTS
+    events_out[index] = uint(min(px.events, 255));
+#endif
+}

@@ -1,0 +1,98 @@
+"""The tracer core shared by the GLSL and OpenCL backends (DESIGN.md section 9).
+
+The files here are written once in the common subset of GLSL 4.30 and
+OpenCL C 1.2. A backend assembles a program as::
+
+    defines + its language prelude + layout.h + its bindings + core.h + its main
+
+where the prelude maps the core's types and helpers to the language
+(``backends/glsl/prelude.glsl``, ``prelude_cl.h`` here) and the bindings say
+how the packed tables are reached (GLSL: storage-buffer arrays, or RGBA32UI
+images on llvmpipe, ``backends/glsl/bindings.glsl``; OpenCL: a struct of
+``__global`` pointers, ``bindings_cl.h``). See ``core.h`` for the
+macros a prelude must provide.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from importlib import resources
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from engine.packing import Features
+
+#: Files of the shared core, in the order they are concatenated (the prelude goes before them).
+CORE_FILES: tuple[str, ...] = ("layout.h", "core.h")
+
+
+def read(name: str, package: str = __name__) -> str:
+    """The text of a kernel file shipped beside a backend (``importlib.resources``, so it works zipped too)."""
+    return resources.files(package).joinpath(name).read_text(encoding="utf-8")
+
+
+def defines_block(defines: dict[str, int | float | str]) -> str:
+    """``#define NAME VALUE`` lines, in a stable order (a variant's source is its cache key)."""
+    lines = []
+    for name in sorted(defines):
+        value = defines[name]
+        if isinstance(value, bool):
+            value = int(value)
+        lines.append(f"#define {name} {value}")
+    return "\n".join(lines) + "\n"
+
+
+# --- helpers both fast backends need (added with the OpenCL backend, issue 4) ----------------
+
+#: The smallest traversal stack compiled; deeper trees get a larger one, in steps of 16.
+MIN_STACK = 32
+
+
+def assemble(header: str, defines: dict[str, int | float | str], files: Sequence[tuple[str, str]]) -> str:
+    """One variant's full source: ``header`` + defines + each ``(package, file)`` in order, each marked."""
+    parts = [header, defines_block(defines)]
+    for package, name in files:
+        parts.append(f"// ---- {name}\n")
+        parts.append(read(name, package))
+    return "".join(parts)
+
+
+def bvh_depth(nodes: np.ndarray, count: int) -> int:
+    """The depth of the deepest tree in a packed node table (all assets' trees together).
+
+    Roots are the nodes no interior node points to; a lone leaf has depth 1.
+    """
+    nodes = nodes[:count]
+    if count == 0:
+        return 0
+    first = nodes["first"].astype(np.int64)
+    inner = nodes["count"] == 0
+    is_child = np.zeros(count, bool)
+    kids = first[inner]
+    is_child[kids[(kids >= 0) & (kids < count)]] = True
+    is_child[kids[(kids + 1 >= 0) & (kids + 1 < count)] + 1] = True
+    frontier = np.flatnonzero(~is_child)
+    depth = 0
+    while frontier.size and depth <= count:
+        depth += 1
+        frontier = frontier[inner[frontier]]
+        frontier = np.concatenate([first[frontier], first[frontier] + 1])
+        frontier = frontier[(frontier >= 0) & (frontier < count)]
+    return depth
+
+
+def stack_size(nodes: np.ndarray, count: int) -> int:
+    """``BVH_STACK_SIZE`` for a node table: every tree's depth fits, rounded up so few variants exist."""
+    return max(MIN_STACK, -(-bvh_depth(nodes, count) // 16) * 16)
+
+
+def unsupported(features: Features) -> str:
+    """What a scene needs that the shared core cannot trace yet ('' when nothing)."""
+    missing = []
+    if features.aberration_modes:
+        missing.append("aberrations (issue 5)")
+    if features.portals:
+        missing.append("portals (issue 6)")
+    return " or ".join(missing)

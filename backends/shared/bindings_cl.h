@@ -1,0 +1,35 @@
+/* bindings_cl.h -- how the OpenCL kernel reaches the packed tables (after layout.h).
+ *
+ * The GLSL twin is backends/glsl/bindings.glsl (global storage buffers). Here
+ * the tables are __global pointers gathered in a private struct that every
+ * core function takes as its first parameter through SCENE_DECL / SCENE_PASS
+ * (both empty in GLSL). A kernel builds it once:
+ *
+ *     SceneTables sc;
+ *     sc.settings = settings; sc.triangles = triangles; ...
+ *     Pixel px = trace_pixel(sc, camera[0], i, j);
+ */
+
+typedef struct SceneTables {
+    __global const Settings* settings;
+    __global const Triangle* triangles;
+    __global const TriangleUv* triangle_uvs;
+    __global const BvhNode* bvh_nodes;
+    __global const Instance* instances;
+    __global const Material* materials;
+    __global const Aberration* aberrations;
+    __global const Portal* portals;
+} SceneTables;
+
+#define SCENE_DECL SceneTables sc,
+#define SCENE_PASS sc,
+
+/* Table access: a record (an lvalue, so .field reads only that field). */
+#define SETTINGS (sc.settings[0])
+#define TRIANGLE(i) (sc.triangles[(i)])
+#define TRIANGLE_UV(i) (sc.triangle_uvs[(i)])
+#define BVH_NODE(i) (sc.bvh_nodes[(i)])
+#define INSTANCE(i) (sc.instances[(i)])
+#define MATERIAL(i) (sc.materials[(i)])
+#define ABERRATION(i) (sc.aberrations[(i)])
+#define PORTAL(i) (sc.portals[(i)])

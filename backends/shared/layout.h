@@ -1,0 +1,100 @@
+/* layout.h -- the packed scene records of engine/layout.py, shared by GLSL and OpenCL C.
+ *
+ * Every record is built from 4-component vectors only, the subset on which
+ * std430 and OpenCL C agree: a record's size is a multiple of its widest
+ * vector (16 bytes, or 32 with REAL_IS_DOUBLE), with no hidden padding.
+ * tests/test_glsl.py checks these sizes against the NumPy dtypes.
+ *
+ * Types (from the prelude): float4 / int4 are always 32-bit; real4 is float4
+ * or, with REAL_IS_DOUBLE, a 4-vector of doubles. STRUCT_BEGIN/STRUCT_END
+ * declare a struct usable by its bare name in both languages.
+ */
+
+/* settings: one row. shading = (ambient, 0, 0, 0);
+ * counts = (instances, aberrations, portals, max_events). */
+STRUCT_BEGIN(Settings)
+    float4 background;
+    float4 light_dir;
+    float4 event_limit_color;
+    float4 shading;
+    int4 counts;
+STRUCT_END(Settings)
+
+/* triangles: object-space vertices of every mesh asset (w unused). */
+STRUCT_BEGIN(Triangle)
+    float4 v0;
+    float4 v1;
+    float4 v2;
+STRUCT_END(Triangle)
+
+/* triangle_uvs: uv01 = (u0, v0, u1, v1), uv2 = (u2, v2, 0, 0). */
+STRUCT_BEGIN(TriangleUv)
+    float4 uv01;
+    float4 uv2;
+STRUCT_END(TriangleUv)
+
+/* bvh_nodes: lo.xyz / hi.xyz bounds (rounded outward); AS_INT(lo.w) = first,
+ * AS_INT(hi.w) = count. count > 0: a leaf over triangles [first, first + count);
+ * count == 0: an interior node whose children are first and first + 1. */
+STRUCT_BEGIN(BvhNode)
+    float4 lo;
+    float4 hi;
+STRUCT_END(BvhNode)
+
+/* materials: color = (r, g, b, checker cell size, 0 = none); flags.x = cull back faces. */
+STRUCT_BEGIN(Material)
+    float4 color;
+    int4 flags;
+STRUCT_END(Material)
+
+/* instances: world_to_object rows (camera-relative world -> object space),
+ * world bounds (camera-relative), meta = (bvh root, material row, entity, flags);
+ * flags bit 0: the asset has UVs. */
+STRUCT_BEGIN(Instance)
+    real4 w2o0;
+    real4 w2o1;
+    real4 w2o2;
+    real4 bounds_min;
+    real4 bounds_max;
+    int4 meta;
+STRUCT_END(Instance)
+
+/* aberrations: world_to_local rows (into the unit box [-1/2, 1/2]^3), rotation
+ * rows R, deformation.xyz = D, meta = (mode, exit, priority, entity). */
+STRUCT_BEGIN(Aberration)
+    real4 w2l0;
+    real4 w2l1;
+    real4 w2l2;
+    real4 rot0;
+    real4 rot1;
+    real4 rot2;
+    real4 deformation;
+    int4 meta;
+STRUCT_END(Aberration)
+
+/* portals: world_to_local rows (quad [-1, 1]^2 at z = 0), transfer rows X,
+ * meta = (target row or -1, entity, 0, 0). */
+STRUCT_BEGIN(Portal)
+    real4 w2l0;
+    real4 w2l1;
+    real4 w2l2;
+    real4 transfer0;
+    real4 transfer1;
+    real4 transfer2;
+    int4 meta;
+STRUCT_END(Portal)
+
+/* camera: one row per frame. position is camera-relative; right/up/back are the
+ * columns of R_cam; origin is the packed origin (for world-space checkers);
+ * lens = (tan(fov/2), aspect, 0, 0); size = (width, height, 0, 0). */
+STRUCT_BEGIN(Camera)
+    real4 position;
+    real4 right;
+    real4 up;
+    real4 back;
+    real4 origin;
+    real4 sigma_min;
+    real4 sigma_max;
+    real4 lens;
+    int4 size;
+STRUCT_END(Camera)

@@ -1,0 +1,66 @@
+/* prelude_cl.h -- the OpenCL C 1.2 spelling of the shared tracer core's types and helpers.
+ *
+ * Twin of backends/glsl/prelude.glsl: same names, same meaning. Include it
+ * first, then layout.h, bindings_cl.h, core.h and the kernel:
+ *
+ *     defines (REAL_IS_DOUBLE, HAS_*, MAX_EVENTS, ...) + prelude_cl.h + layout.h
+ *     + bindings_cl.h + core.h + the kernel that calls trace_pixel()
+ *
+ * Defines read here: REAL_IS_DOUBLE (trace in double; needs cl_khr_fp64),
+ * EDGE_FALLBACK_FP64 and WORLD_FP64 (double helpers in a float tracer; set
+ * them only when the device has cl_khr_fp64).
+ */
+
+#if REAL_IS_DOUBLE || EDGE_FALLBACK_FP64 || WORLD_FP64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif
+/* No contraction into fused multiply-adds: the watertight edge functions need
+ * a*b - c*d computed as two rounded products (GLSL says `precise`). */
+#pragma OPENCL FP_CONTRACT OFF
+
+/* --- scalar and vector types ------------------------------------------------------ */
+#if REAL_IS_DOUBLE
+typedef double real;
+typedef double2 real2;
+typedef double3 real3;
+typedef double4 real4;
+#define REAL_MAX 1.0e300
+#define REAL_TINY 1.0e-300
+#define TO_REAL3(v) convert_double3(v)
+#else
+typedef float real;
+typedef float2 real2;
+typedef float3 real3;
+typedef float4 real4;
+#define REAL_MAX 3.0e38f
+#define REAL_TINY 1.0e-30f
+#define TO_REAL3(v) convert_float3(v)
+#endif
+
+/* --- constructors and conversions ------------------------------------------------- */
+#define REAL(x) ((real)(x))
+#define R2(a, b) ((real2)((real)(a), (real)(b)))
+#define R3(a, b, c) ((real3)((real)(a), (real)(b), (real)(c)))
+#define R4(a, b, c, d) ((real4)((real)(a), (real)(b), (real)(c), (real)(d)))
+#define R3S(s) ((real3)((real)(s)))
+#define F3(a, b, c) ((float3)((float)(a), (float)(b), (float)(c)))
+#define F4(a, b, c, d) ((float4)((float)(a), (float)(b), (float)(c), (float)(d)))
+#define TO_REAL(x) ((real)(x))
+#define TO_FLOAT(x) ((float)(x))
+#define TO_FLOAT3(v) convert_float3(v)
+#define TO_INT(x) ((int)(x))
+#define TO_DOUBLE(x) ((double)(x))
+#define AS_INT(x) as_int(x)
+#define AS_FLOAT(x) as_float(x)
+
+/* --- helpers ------------------------------------------------------------------------ */
+#define ABS(x) fabs(x)
+/* Component i (0, 1, 2) of a real3, i not a constant (OpenCL C has no v[i]). */
+inline real vidx3_(real3 v, int i) { return i == 0 ? v.x : (i == 1 ? v.y : v.z); }
+#define VIDX3(v, i) vidx3_(v, i)
+#define PRECISE
+#define F_INF INFINITY
+
+/* A struct usable by its bare name, as in GLSL. */
+#define STRUCT_BEGIN(name) typedef struct name name; struct name {
+#define STRUCT_END(name) };

@@ -1,0 +1,339 @@
+"""Fast backends against the float64 reference: same scene, same camera, same answers (issues 3 and 4).
+
+Every fast backend is listed once in FAST_BACKENDS; each scene is rendered by
+the reference once per module and compared with every backend: instance ids
+(mismatch <= 0.1 %), depth (relative error median <= 1e-5, 99th percentile
+<= 1e-3 where both hit the same instance), zero holes in closed meshes around
+the camera, far-from-origin stability and clean AOVs (no NaN; +inf depth only
+on a miss).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from backends.base import AOVS, Frame
+from backends.reference.backend import ReferenceBackend
+from components import Transform
+from demos import starter
+from engine.packing import ScenePacker, scene_camera
+from engine.scene import Scene
+
+#: (backend, precision) pairs measured against the reference. The OpenCL backend slots in here.
+FAST_BACKENDS = [
+    pytest.param("glsl", "f32", id="glsl-f32"),
+    pytest.param("glsl", "f64", id="glsl-f64"),
+    pytest.param("opencl", "f32", id="opencl-f32"),
+    pytest.param("opencl", "f64", id="opencl-f64"),
+]
+
+MISMATCH_MAX = 1e-3
+FAR_MISMATCH_MAX = 5e-3
+DEPTH_MEDIAN_MAX = 1e-5
+DEPTH_P99_MAX = 1e-3
+#: f64 tracers must agree with the reference to this 99th-percentile relative depth error.
+F64_DEPTH_P99_MAX = 1e-9
+#: The far-from-origin scenes are moved by this (camera too): about 1e5 units, with fractions so the
+#: floating origin (a 16-unit grid) does not absorb the move exactly.
+FAR = (100000.37, -99999.61, 100000.173)
+
+
+# --- scenes ------------------------------------------------------------------------------------
+
+
+def random_boxes(count: int = 50, seed: int = 5) -> Scene:
+    """``count`` boxes of random size, turn and colour in a cloud in front of the camera."""
+    rng = np.random.default_rng(seed)
+    scene = Scene("random-boxes")
+    for k in range(count):
+        scene.add_mesh(
+            f"box{k}",
+            "box",
+            position=tuple(rng.uniform([-4.0, -3.0, -6.0], [4.0, 3.0, 2.0])),
+            euler_deg=tuple(rng.uniform(-180.0, 180.0, 3)),
+            scale=tuple(rng.uniform(0.2, 1.6, 3)),
+            color=tuple(rng.uniform(0.2, 1.0, 3)),
+            checker=float(rng.choice([0.0, 0.25])),
+            cull_backfaces=bool(k % 7 == 0),
+        )
+    scene.set_camera((0.5, 1.0, 5.0), look_at=(0.0, 0.0, -2.0), fov_deg=65.0)
+    return scene
+
+
+def torus_obj(folder: Path) -> Path:
+    """An imported mesh of exactly 10,000 triangles (no UVs: triplanar checker)."""
+    path = folder / "torus10k.obj"
+    if not path.exists():
+        mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.35, major_sections=100, minor_sections=50)
+        assert len(mesh.faces) == 10_000
+        mesh.export(path)
+    return path
+
+
+def imported_mesh(folder: Path) -> Scene:
+    scene = Scene("imported-mesh")
+    scene.add_asset("torus", path=torus_obj(folder))
+    scene.add_mesh("torus", "torus", euler_deg=(60.0, 20.0, 0.0), scale=1.5, color=(0.9, 0.7, 0.3), checker=0.1)
+    scene.add_mesh("torus2", "torus", position=(1.2, -0.6, -2.5), euler_deg=(-20.0, 0.0, 35.0), color=(0.3, 0.6, 0.9))
+    scene.add_mesh("floor", "plane", position=(0.0, -1.5, 0.0), scale=(20.0, 1.0, 20.0), checker=0.5)
+    scene.set_camera((0.4, 1.2, 4.2), look_at=(0.0, -0.2, 0.0), fov_deg=55.0)
+    return scene
+
+
+def grid_cube(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The cube [-1/2, 1/2]^3, each face an n x n grid of quads with shared vertices and alternating diagonals."""
+    ids: dict[tuple[int, int, int], int] = {}
+    faces = []
+
+    def vertex(p: tuple[int, int, int]) -> int:
+        return ids.setdefault(p, len(ids))
+
+    for axis in range(3):
+        u_axis, v_axis = (axis + 1) % 3, (axis + 2) % 3
+        for side in (0, n):
+            for i in range(n):
+                for j in range(n):
+                    corners = []
+                    for du, dv in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                        p = [0, 0, 0]
+                        p[axis], p[u_axis], p[v_axis] = side, i + du, j + dv
+                        corners.append(vertex((p[0], p[1], p[2])))
+                    a, b, c, d = corners if side == n else corners[::-1]
+                    faces += [(a, b, c), (a, c, d)] if (i + j) % 2 == 0 else [(a, b, d), (b, c, d)]
+    vertices = np.array(list(ids), dtype=np.float64) / n - 0.5
+    return vertices, np.array(faces)
+
+
+def grid_cube_ply(folder: Path, n: int = 64) -> Path:
+    path = folder / f"grid_cube{n}.ply"
+    if not path.exists():
+        vertices, faces = grid_cube(n)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent
+        mesh.export(path)
+    return path
+
+
+def inside_grid_cube(folder: Path, view: str) -> Scene:
+    """The camera at the centre of a closed 64 x 64-per-face grid cube of side 2: every ray must hit.
+
+    ``vertices``: 65 x 65 pixels whose centre rays pass through grid vertices (and, at the border,
+    through the cube's edges); ``diagonals``: 64 x 64 pixels whose rays cross cell centres, on the
+    shared diagonal edges; ``corner``: looking into a corner, rays along the faces' shared edges.
+    """
+    scene = Scene(f"watertight-{view}")
+    scene.add_asset("cube", path=grid_cube_ply(folder))
+    scene.add_mesh("cube", "cube", scale=2.0, color=(0.8, 0.8, 0.8), checker=0.3)
+    if view == "vertices":
+        scene.set_camera((0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), fov_deg=2 * math.degrees(math.atan(65 / 64)))
+    elif view == "diagonals":
+        scene.set_camera((0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), fov_deg=90.0)
+    else:
+        scene.set_camera((0.0, 0.0, 0.0), look_at=(1.0, 1.0, -1.0), fov_deg=100.0)
+    return scene
+
+
+def inside_sphere(folder: Path) -> Scene:
+    """The camera inside a placed, closed icosphere (20,480 triangles): every ray must hit."""
+    path = folder / "icosphere5.ply"
+    if not path.exists():
+        trimesh.creation.icosphere(subdivisions=5, radius=1.0).export(path)
+    scene = Scene("watertight-sphere")
+    scene.add_asset("sphere", path=path)
+    scene.add_mesh("sphere", "sphere", position=(0.1, -0.2, 0.05), euler_deg=(17.0, 41.0, -8.0), scale=(3.0, 2.0, 2.5))
+    scene.set_camera((0.2, 0.1, 0.3), look_at=(1.0, 0.5, -2.0), fov_deg=120.0)
+    return scene
+
+
+def translated(scene: Scene, offset: tuple[float, float, float]) -> Scene:
+    """The scene with every transform (camera included) moved by ``offset``."""
+    for entity, transform in scene.query(Transform):
+        position = tuple(float(p + o) for p, o in zip(transform.position, offset, strict=True))
+        scene.set(entity, replace(transform, position=position))
+    return scene
+
+
+@dataclass(frozen=True)
+class Case:
+    """A parity scene: how to build it, the frame size, and whether every pixel must hit."""
+
+    build: Callable[[Path], Scene]
+    size: tuple[int, int]
+    closed: bool = False
+    #: Fraction of same-instance pixels allowed a colour more than 2 levels off. Rays exactly through
+    #: the edges where two faces of a cube meet may rightly hit either face (another normal, another shade).
+    color_off: float = 0.01
+
+
+CASES: dict[str, Case] = {
+    "starter": Case(lambda folder: starter.build(), (128, 96)),
+    "random-boxes": Case(lambda folder: random_boxes(), (128, 96)),
+    "imported-mesh": Case(imported_mesh, (128, 96)),
+    "watertight-vertices": Case(
+        lambda folder: inside_grid_cube(folder, "vertices"), (65, 65), closed=True, color_off=0.05
+    ),
+    "watertight-diagonals": Case(lambda folder: inside_grid_cube(folder, "diagonals"), (64, 64), closed=True),
+    "watertight-corner": Case(lambda folder: inside_grid_cube(folder, "corner"), (64, 48), closed=True),
+    "watertight-sphere": Case(inside_sphere, (64, 48), closed=True),
+}
+FAR_CASES = ["starter", "random-boxes"]
+
+
+# --- rendering ------------------------------------------------------------------------------------
+
+
+def render(backend, scene: Scene, size: tuple[int, int]) -> Frame:
+    """Pack for ``backend`` (camera-relative or not), upload everything, render every AOV."""
+    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    updates = packer.sync(scene)
+    assert packer.packed is not None
+    backend.upload(packer.packed, updates)
+    return backend.render(scene_camera(scene), size[0], size[1], AOVS)
+
+
+@pytest.fixture(scope="module")
+def assets(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("parity-assets")
+
+
+@pytest.fixture(scope="module")
+def reference_frames(assets):
+    """``frame(name)``: the reference's frame of a case, rendered once per module."""
+    backend = ReferenceBackend()
+    cache: dict[str, Frame] = {}
+
+    def frame(name: str) -> Frame:
+        if name not in cache:
+            scene = CASES[name].build(assets)
+            try:
+                cache[name] = render(backend, scene, CASES[name].size)
+            finally:
+                scene.close()
+        return cache[name]
+
+    yield frame
+    backend.release()
+
+
+# --- checks ---------------------------------------------------------------------------------------
+
+
+def assert_clean(frame: Frame) -> None:
+    """No NaN anywhere; depth and perceived finite and positive on hits, +inf exactly on misses."""
+    assert frame.present() == list(AOVS)
+    hit = frame.instance >= 0
+    for name in ("depth", "perceived"):
+        value = frame.aov(name)
+        assert value.dtype == np.float32
+        assert not np.isnan(value).any(), f"NaN in {name}"
+        assert np.all(np.isfinite(value[hit]) & (value[hit] > 0)), f"non-finite {name} on a hit"
+        assert np.all(value[~hit] == np.inf), f"finite {name} on a miss"
+    assert frame.color.dtype == np.uint8 and frame.events.dtype == np.uint8
+    assert frame.instance.dtype == np.int32
+
+
+@dataclass(frozen=True)
+class Comparison:
+    mismatch: float
+    depth_median: float
+    depth_p99: float
+    color_off: float  # fraction of same-instance pixels whose colour differs by more than 2 levels
+
+    def __str__(self) -> str:
+        return (
+            f"mismatch {self.mismatch:.4%}, depth rel. error median {self.depth_median:.2e} "
+            f"p99 {self.depth_p99:.2e}, colour off {self.color_off:.3%}"
+        )
+
+
+def compare(fast: Frame, ref: Frame) -> Comparison:
+    mismatch = float(np.mean(fast.instance != ref.instance))
+    same = (fast.instance == ref.instance) & (ref.instance >= 0)
+    if same.any():
+        truth = ref.depth[same].astype(np.float64)
+        rel = np.abs(fast.depth[same].astype(np.float64) - truth) / truth
+        median, p99 = float(np.median(rel)), float(np.percentile(rel, 99))
+        off = np.abs(fast.color.astype(int) - ref.color.astype(int)).max(axis=2)[same] > 2
+        color_off = float(off.mean())
+    else:
+        median = p99 = color_off = 0.0
+    return Comparison(mismatch, median, p99, color_off)
+
+
+# --- tests -------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_parity_with_the_reference(backend_factory, reference_frames, assets, backend_name, precision, case):
+    backend = backend_factory(backend_name, precision)
+    ref = reference_frames(case)
+    scene = CASES[case].build(assets)
+    try:
+        fast = render(backend, scene, CASES[case].size)
+    finally:
+        scene.close()
+    assert_clean(fast)
+    assert_clean(ref)
+    result = compare(fast, ref)
+    assert (ref.instance >= 0).mean() > 0.3, "the case should show mostly geometry"
+    assert result.mismatch <= MISMATCH_MAX, result
+    assert result.depth_median <= DEPTH_MEDIAN_MAX, result
+    assert result.depth_p99 <= DEPTH_P99_MAX, result
+    if precision == "f64":
+        assert result.depth_p99 <= F64_DEPTH_P99_MAX, result
+    assert result.color_off <= CASES[case].color_off, result
+    if CASES[case].closed:
+        holes = int(np.sum(fast.instance < 0))
+        assert holes == 0, f"{holes} rays fell through the closed mesh"
+        assert np.all(ref.instance >= 0)
+
+
+@pytest.mark.parametrize("case", FAR_CASES)
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_far_from_the_origin(backend_factory, reference_frames, assets, backend_name, precision, case):
+    """The scene and camera moved by 1e5 units render as the untranslated reference does."""
+    backend = backend_factory(backend_name, precision)
+    ref = reference_frames(case)
+    scene = translated(CASES[case].build(assets), FAR)
+    try:
+        fast = render(backend, scene, CASES[case].size)
+    finally:
+        scene.close()
+    assert_clean(fast)
+    result = compare(fast, ref)
+    assert result.mismatch <= FAR_MISMATCH_MAX, result
+    assert result.depth_median <= 1e-4, result
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory, backend_name, precision):
+    """Row uploads and the floating origin following the camera keep the frames right, tick after tick."""
+    backend = backend_factory(backend_name, precision)
+    reference = ReferenceBackend()
+    scene = random_boxes(20, seed=9)
+    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    mover = scene.entity("box3")
+    try:
+        for step in range(4):
+            scene.set_camera((0.5 + 9.0 * step, 1.0, 8.0 - 7.0 * step), look_at=(0.0, 0.0, -2.0), fov_deg=65.0)
+            transform = scene.get(mover, Transform)
+            scene.set(mover, replace(transform, position=(0.3 * step, 0.5, -1.0)))
+            updates = packer.sync(scene)
+            assert packer.packed is not None
+            backend.upload(packer.packed, updates)
+            fast = backend.render(scene_camera(scene), 64, 48, AOVS)
+            ref = render(reference, scene, (64, 48))
+            assert_clean(fast)
+            result = compare(fast, ref)
+            assert result.mismatch <= MISMATCH_MAX and result.depth_p99 <= DEPTH_P99_MAX, (step, str(result))
+    finally:
+        scene.close()
+        reference.release()
