@@ -8,7 +8,7 @@
 #      llvmpipe, the OpenCL ICD loader, glfw for the editor. Checked with dpkg on
 #      every run (fast); apt-get runs only when something is missing.
 #   2. .venv (python3.11, or python3 if it is 3.11+), pip upgraded, then
-#      `pip install -e '.[dev,glsl,opencl]'`; stamped on pyproject.toml, so
+#      `pip install -e '.[dev,glsl,opencl,editor]'`; stamped on pyproject.toml, so
 #      editing pyproject reinstalls and nothing else does.
 
 SHELL := /bin/bash
@@ -23,14 +23,14 @@ SHELL := /bin/bash
 #   libgl1           libGL.so.1, which glcontext's EGL backend also loads for GL symbols
 #   libgl1-mesa-dri  the Mesa drivers, llvmpipe (software rasteriser) among them
 # OpenCL: ocl-icd-libopencl1 (system ICD loader; PoCL itself comes from PyPI, pyopencl[pocl]).
-# Editor: libglfw3.
-APT_PACKAGES := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri ocl-icd-libopencl1 libglfw3
+# Editor: libglfw3; xvfb for its window tests (a virtual display on a headless machine).
+APT_PACKAGES := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri ocl-icd-libopencl1 libglfw3 xvfb
 
 # The interpreter the venv is made from; override with `make BASE_PYTHON=/path/to/python3.x test`.
 BASE_PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3 2>/dev/null)
 VENV := .venv
 PY := $(VENV)/bin/python
-EXTRAS := dev,glsl,opencl
+EXTRAS := dev,glsl,opencl,editor
 VENV_OK := $(VENV)/.stamp-venv
 INSTALLED := $(VENV)/.stamp-installed
 

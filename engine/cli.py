@@ -222,6 +222,22 @@ def cmd_demos(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_editor(args: argparse.Namespace) -> int:
+    """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
+    try:
+        from editor.app import EditorUnavailable, display_problem, load_target, run_editor
+    except ImportError as e:
+        raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
+    problem = display_problem()
+    if problem is not None:
+        raise UsageError(problem)
+    model = load_target(args.scene)  # a bad file or name fails here, before a window opens
+    try:
+        return run_editor(model, backend=args.backend)
+    except EditorUnavailable as e:
+        raise UsageError(str(e)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Ray trace triangle-mesh scenes in deformed space.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
@@ -260,6 +276,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     demos = sub.add_parser("demos", help="list the demos")
     demos.set_defaults(func=cmd_demos)
+
+    editor = sub.add_parser("editor", help="open the level editor (play mode included) on a scene file or demo")
+    editor.add_argument("scene", metavar="SCENE|DEMO", nargs="?", default=None, help="a scene file or demo name")
+    editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
+    editor.set_defaults(func=cmd_editor)
     return parser
 
 

@@ -1,0 +1,1 @@
+"""The editor's panels: each draws one imgui window, menu or dialog, and edits only through the model."""
