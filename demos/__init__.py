@@ -20,6 +20,14 @@ if TYPE_CHECKING:
 #: Demo name -> module path.
 DEMOS: dict[str, str] = {
     "starter": "demos.starter",
+    "aberration_room": "demos.aberration_room",
+    "aberration_tunnels": "demos.aberration_tunnels",
+    "geometry_room": "demos.geometry_room",
+    "house": "demos.house",
+    "endless_corridor": "demos.endless_corridor",
+    "bigger_inside": "demos.bigger_inside",
+    "nested_aberrations": "demos.nested_aberrations",
+    "portal_in_aberration": "demos.portal_in_aberration",
 }
 
 
