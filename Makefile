@@ -39,13 +39,14 @@ INSTALLED := $(VENV)/.stamp-installed
 PYTEST_ARGS ?=
 DEMO_OUT := out/starter.png
 
-.PHONY: help setup apt-packages demo test bench lint format clean
+.PHONY: help setup apt-packages demo gallery test bench lint format clean
 
 help:
 	@echo "aberrant — make targets:"
 	echo "  make demo    install what is missing, render the starter demo to $(DEMO_OUT)"
 	echo "  make test    install what is missing, run the test suite (pytest -q)"
 	echo "  make bench   run the benchmarks (pytest-benchmark)"
+	echo "  make gallery render every demo into docs/gallery/ (the README's gallery)"
 	echo "  make lint    ruff check + ruff format --check"
 	echo "  make format  ruff format + ruff check --fix"
 	echo "  make setup   only install (apt packages, .venv, the package in editable mode)"
@@ -125,6 +126,12 @@ demo: | apt-packages $(INSTALLED)
 	echo "==> rendering the starter demo"
 	"$(VENV)/bin/aberrant" render starter --backend auto --size 800x600 --out "$(DEMO_OUT)"
 	echo "==> image: $(abspath $(DEMO_OUT))"
+
+# The README's gallery: every demo at 320x240 (the reference backend: the truth, and it traces everything).
+gallery: | apt-packages $(INSTALLED)
+	@for demo in $$("$(PY)" -c 'from demos import demo_names; print(" ".join(demo_names()))'); do
+	  "$(VENV)/bin/aberrant" render "$$demo" --backend reference --size 320x240 --out "docs/gallery/$$demo.png"
+	done
 
 test: | apt-packages $(INSTALLED)
 	@"$(PY)" -m pytest -q $(PYTEST_ARGS)

@@ -48,3 +48,12 @@ def test_scene_file_example_loads(tmp_path: Path) -> None:
     assert scene.name == "courtyard"
     assert scene.get(scene.entity("door_a"), Portal).target == "door_b"
     assert scene.get(scene.entity("long_hall"), Aberration).deformation == (0.0, 0.0, 1.0)
+
+
+def test_gallery_shows_every_demo() -> None:
+    from demos import demo_names
+
+    text = (ROOT / "README.md").read_text()
+    for name in demo_names():
+        assert f"docs/gallery/{name}.png" in text, f"README gallery lacks {name}"
+        assert (ROOT / "docs" / "gallery" / f"{name}.png").is_file(), f"run `make gallery`: {name}.png missing"
