@@ -8,7 +8,7 @@
 #      llvmpipe, the OpenCL ICD loader, glfw for the editor. Checked with dpkg on
 #      every run (fast); apt-get runs only when something is missing.
 #   2. .venv (python3.11, or python3 if it is 3.11+), pip upgraded, then
-#      `pip install -e '.[dev,glsl,opencl,editor]'`; stamped on pyproject.toml, so
+#      `pip install -e '.[dev,glsl,opencl,editor,bench]'`; stamped on pyproject.toml, so
 #      editing pyproject reinstalls and nothing else does.
 
 SHELL := /bin/bash
@@ -31,7 +31,7 @@ APT_PACKAGES := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri ocl-icd-libopencl1 p
 BASE_PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3 2>/dev/null)
 VENV := .venv
 PY := $(VENV)/bin/python
-EXTRAS := dev,glsl,opencl,editor
+EXTRAS := dev,glsl,opencl,editor,bench
 VENV_OK := $(VENV)/.stamp-venv
 INSTALLED := $(VENV)/.stamp-installed
 
@@ -39,13 +39,14 @@ INSTALLED := $(VENV)/.stamp-installed
 PYTEST_ARGS ?=
 DEMO_OUT := out/starter.png
 
-.PHONY: help setup apt-packages demo gallery test bench lint format clean
+.PHONY: help setup apt-packages demo gallery test bench bench-pytest lint format clean
 
 help:
 	@echo "aberrant — make targets:"
 	echo "  make demo    install what is missing, render the starter demo to $(DEMO_OUT)"
 	echo "  make test    install what is missing, run the test suite (pytest -q)"
-	echo "  make bench   run the benchmarks (pytest-benchmark)"
+	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
+	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
 	echo "  make gallery render every demo into docs/gallery/ (the README's gallery)"
 	echo "  make lint    ruff check + ruff format --check"
 	echo "  make format  ruff format + ruff check --fix"
@@ -136,9 +137,14 @@ gallery: | apt-packages $(INSTALLED)
 test: | apt-packages $(INSTALLED)
 	@"$(PY)" -m pytest -q $(PYTEST_ARGS)
 
+# Speed against error: every backend and setting on every scene -> out/bench/{report.md,results.json,speed_vs_error.png}.
+bench: | apt-packages $(INSTALLED)
+	@"$(VENV)/bin/aberrant" bench --out out/bench $(BENCH_ARGS)
+
+# The pytest-benchmark micro-benchmarks (tests/bench_*.py).
 # --benchmark-only overrides the --benchmark-skip in pyproject's addopts;
 # --benchmark-enable overrides a --benchmark-disable should one be added.
-bench: | apt-packages $(INSTALLED)
+bench-pytest: | apt-packages $(INSTALLED)
 	@"$(PY)" -m pytest -q -rfE --benchmark-only --benchmark-enable tests/ $(PYTEST_ARGS)
 
 lint: | apt-packages $(INSTALLED)

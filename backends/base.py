@@ -94,6 +94,22 @@ class Backend(ABC):
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Trace one frame of the uploaded scene from ``camera``."""
 
+    def check_request(self, width: int, height: int, aovs: Sequence[str], *, uploaded: bool) -> tuple[int, int]:
+        """Validate a render request the same way in every backend; returns ``(width, height)`` as ints.
+
+        Raises :class:`AberrantError` for a render before any upload, an unknown AOV name or a
+        non-positive image size.
+        """
+        if not uploaded:
+            raise AberrantError(f"{self.name} backend: render() before upload(); upload a packed scene first")
+        unknown = [a for a in aovs if a not in AOVS]
+        if unknown:
+            raise AberrantError(f"unknown AOV(s) {', '.join(map(repr, unknown))}; AOVs are {', '.join(AOVS)}")
+        width, height = int(width), int(height)
+        if width <= 0 or height <= 0:
+            raise AberrantError(f"image size must be positive, got {width}x{height}")
+        return width, height
+
     def release(self) -> None:  # noqa: B027 - optional hook, most backends override it
         """Free device resources (idempotent)."""
 
@@ -132,23 +148,28 @@ def resolve_name(name: str | None = None, *, fallback: bool = True, log: object 
     """Turn ``name`` (or ``ABERRANT_BACKEND``, or ``auto``) into a backend that can run here.
 
     ``auto`` picks the fastest available and says which. A named backend that
-    cannot run falls back to ``auto`` with a message when ``fallback`` is
-    true, and raises :class:`BackendUnavailable` otherwise.
+    cannot run falls back to ``auto`` with a one-line message (why, and which
+    backend instead) when ``fallback`` is true, and raises
+    :class:`BackendUnavailable` otherwise.
     """
     say = log if callable(log) else (lambda message: print(message, file=sys.stderr))
     name = name or default_backend_name()
+    failed = None  # why the named backend cannot run: the fallback is then said in one line
     if name != "auto":
         reason = probe(name)
         if reason is None:
             return name
         if not fallback:
             raise BackendUnavailable(f"{name} backend cannot run here: {reason}")
-        say(f"aberrant: {name} backend cannot run here ({reason}); falling back to auto")
+        failed = f"{name} backend cannot run here ({' '.join(reason.split())})"
     reasons = []
     for candidate in AUTO_ORDER:
         reason = probe(candidate)
         if reason is None:
-            say(f"aberrant: auto chose the {candidate} backend")
+            if failed is None:
+                say(f"aberrant: auto chose the {candidate} backend")
+            else:
+                say(f"aberrant: {failed}; falling back to the {candidate} backend")
             return candidate
         reasons.append(f"{candidate}: {reason}")
     raise BackendUnavailable("no backend can run here: " + "; ".join(reasons))  # pragma: no cover

@@ -31,7 +31,10 @@ class ValidationError(ValueError):
 def real(value: object, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise ValidationError(field, f"expected a number, got {type(value).__name__} {value!r}")
-    result = float(value)
+    try:
+        result = float(value)
+    except OverflowError:  # an integer beyond the float range, e.g. 10**400 in a scene file
+        raise ValidationError(field, "must be finite, got an integer too large for a float") from None
     if not math.isfinite(result):
         raise ValidationError(field, f"must be finite, got {result}")
     return result
@@ -80,7 +83,14 @@ def boolean(value: object, field: str) -> bool:
     return value
 
 
+#: Integers are packed for the tracers as int32.
+INT32_RANGE = (-(2**31), 2**31 - 1)
+
+
 def integer(value: object, field: str) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValidationError(field, f"expected an integer, got {value!r}")
+    low, high = INT32_RANGE
+    if not low <= value <= high:  # the tracers pack integers as int32
+        raise ValidationError(field, f"must lie in [{low}, {high}], got {value}")
     return value

@@ -7,8 +7,12 @@ two entities naming one file share one asset, and an edited file is re-read.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import logging
 import math
+import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -43,19 +47,43 @@ class MeshAsset:
 
 
 def make_asset(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, source: str) -> MeshAsset:
-    """Validate and freeze geometry; the content hash identifies it everywhere (BVH cache, packing)."""
-    v = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
-    f = np.ascontiguousarray(faces, dtype=np.int32)
-    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
-        raise AssetError(f"{source}: holds no triangles (faces of shape {f.shape}); export it as a triangle mesh")
+    """Validate and freeze geometry; the content hash identifies it everywhere (BVH cache, packing).
+
+    Whatever a file parser hands over (odd shapes, float or huge indices,
+    values beyond float32) becomes an :class:`AssetError` naming ``source``,
+    never a numpy exception or a silently wrapped index.
+    """
+    try:
+        raw_v = np.asarray(vertices)
+        raw_f = np.asarray(faces)
+    except (TypeError, ValueError) as e:  # ragged nested lists
+        raise AssetError(f"{source}: vertices or faces are not arrays ({e})") from None
+    if raw_v.ndim != 2 or raw_v.shape[1] != 3 or not np.issubdtype(raw_v.dtype, np.number):
+        raise AssetError(f"{source}: vertices must be (N, 3) numbers, got shape {raw_v.shape} of {raw_v.dtype}")
+    if raw_f.ndim != 2 or raw_f.shape[1] != 3 or raw_f.shape[0] == 0:
+        raise AssetError(f"{source}: holds no triangles (faces of shape {raw_f.shape}); export it as a triangle mesh")
+    if not (np.issubdtype(raw_f.dtype, np.integer) or np.issubdtype(raw_f.dtype, np.floating)):
+        raise AssetError(f"{source}: face indices must be integers, got {raw_f.dtype}")
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow to inf is reported just below
+        v = np.ascontiguousarray(raw_v, dtype=np.float32)
     if not np.all(np.isfinite(v)):
-        raise AssetError(f"{source}: vertex coordinates contain NaN or infinity")
-    if f.min() < 0 or f.max() >= len(v):
-        raise AssetError(f"{source}: face indices out of range [0, {len(v)})")
+        raise AssetError(f"{source}: vertex coordinates contain NaN or infinity (or exceed the float32 range)")
+    if np.issubdtype(raw_f.dtype, np.floating) and not (
+        np.all(np.isfinite(raw_f)) and np.array_equal(raw_f, np.round(raw_f))
+    ):
+        raise AssetError(f"{source}: face indices must be whole numbers")
+    low, high = raw_f.min(), raw_f.max()
+    if low < 0 or high >= len(v):  # checked before the int32 cast, which would wrap a huge index into range
+        raise AssetError(f"{source}: face indices out of range [0, {len(v)}) (found {int(low)}..{int(high)})")
+    f = np.ascontiguousarray(raw_f, dtype=np.int32)
     uv = None
     if uvs is not None:
-        uv = np.ascontiguousarray(uvs, dtype=np.float32).reshape(-1, 2)
-        if len(uv) != len(v) or not np.all(np.isfinite(uv)):
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):
+                uv = np.ascontiguousarray(uvs, dtype=np.float32).reshape(-1, 2)
+        except (TypeError, ValueError):
+            uv = None
+        if uv is not None and (len(uv) != len(v) or not np.all(np.isfinite(uv))):
             uv = None  # unusable UVs: fall back to triplanar texturing rather than failing the load
     h = hashlib.sha256()
     for a in (v, f) + ((uv,) if uv is not None else ()):
@@ -164,13 +192,18 @@ class AssetLibrary:
         except FileNotFoundError:
             raise AssetError(f"{p}: mesh file not found") from None
         except OSError as e:
-            raise AssetError(f"{p}: cannot read mesh file ({e.strerror})") from None
+            raise AssetError(f"{p}: cannot read mesh file ({e.strerror or e})") from None
+        except ValueError as e:  # a NUL byte in the path (a hand-edited or hostile scene file)
+            raise AssetError(f"{str(p)!r}: not a usable file path ({e})") from None
         if not resolved.is_file():
             raise AssetError(f"{p}: not a file")
         key = (str(resolved), st.st_mtime_ns, st.st_size)
         if key in self._by_stat:
             return self._by_stat[key]
-        data = resolved.read_bytes()
+        try:
+            data = resolved.read_bytes()
+        except OSError as e:  # unreadable (permissions, I/O error) or removed since the stat
+            raise AssetError(f"{p}: cannot read mesh file ({e.strerror or e})") from None
         digest = hashlib.sha256(data).hexdigest()
         asset = self._by_content.get(digest)
         if asset is None:
@@ -191,9 +224,10 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
     import trimesh
 
     try:
-        loaded = trimesh.load(
-            io.BytesIO(data), file_type=suffix.lstrip("."), force="mesh", process=False, resolver=_resolver(path)
-        )
+        with _quiet_trimesh():
+            loaded = trimesh.load(
+                io.BytesIO(data), file_type=suffix.lstrip("."), force="mesh", process=False, resolver=_resolver(path)
+            )
     except Exception as e:  # trimesh raises many types on malformed files
         raise AssetError(f"{path}: cannot parse mesh ({type(e).__name__}: {e})") from None
     faces = getattr(loaded, "faces", None)
@@ -202,6 +236,28 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
         raise AssetError(f"{path}: holds no triangles")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     return make_asset(np.asarray(vertices), np.asarray(faces), None if uv is None else np.asarray(uv), str(path))
+
+
+@contextlib.contextmanager
+def _quiet_trimesh() -> Iterator[None]:
+    """Keep trimesh's log records and numpy warnings off stderr while it parses a file.
+
+    On a malformed file trimesh logs tracebacks (through logging's last-resort
+    handler when the application configured none) before raising or giving
+    up; the caller reports the outcome as one AssetError instead.
+    """
+    logger = logging.getLogger("trimesh")
+    handler = logging.NullHandler()
+    propagate = logger.propagate
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
 
 
 def _resolver(path: Path) -> object:

@@ -17,23 +17,29 @@ import os
 import re
 import sys
 import time
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, NoReturn, TypeVar
 
 import numpy as np
 
 from engine.errors import AberrantError
 
 if TYPE_CHECKING:
-    from backends.base import Frame
+    from backends.base import Backend, Frame
     from engine.scene import Scene
 
 PROG = "aberrant"
 #: The largest image side ``render`` accepts (guards against typos like 80000x600).
 MAX_SIDE = 16384
+#: The backend a render falls back to when the chosen one fails while rendering (it traces everything).
+FALLBACK_BACKEND = "reference"
 #: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
 NPZ_AOVS = ("depth", "perceived", "instance", "events")
+
+
+T = TypeVar("T")
 
 
 class UsageError(AberrantError):
@@ -97,8 +103,66 @@ def _npz_bytes(frame: Frame) -> bytes:
     return buffer.getvalue()
 
 
+def _brief(message: str, errors: int = 2) -> str:
+    """A backend failure in one line: its first line plus the first ``errors`` lines that say "error"
+    (a compiler log can run to hundreds of lines; the first errors are the ones to read)."""
+    lines = [line.strip() for line in message.splitlines() if line.strip()]
+    if not lines:
+        return ""
+    found = [line for line in lines[1:] if "error" in line.lower()][:errors]
+    return _one_line(" | ".join([lines[0], *found]))
+
+
+def _raised_by_backend(error: BaseException, backend: Backend) -> bool:
+    """Whether ``error`` is the backend's own failure (raised in its package), not the scene's or the caller's."""
+    from engine.errors import BackendUnavailable
+
+    if isinstance(error, BackendUnavailable):
+        return True
+    package = type(backend).__module__.rpartition(".")[0] or type(backend).__module__
+    tb = error.__traceback__
+    while tb is not None:
+        module = str(tb.tb_frame.f_globals.get("__name__", ""))
+        if module == package or module.startswith(f"{package}."):
+            return True
+        tb = tb.tb_next
+    return False
+
+
+def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> tuple[T, str]:
+    """``render(backend)`` on the chosen backend, falling back to the reference when it fails while rendering.
+
+    Choosing a backend already falls back when one cannot start (it says why);
+    a fast backend can still fail on its first frame, when its kernel is
+    built: a driver that cannot compile it, a scene feature it does not
+    trace. The scene itself is fine (it loaded), so the reference, which
+    traces everything, renders it instead, after a one-line message saying
+    which backend failed and the compiler's first errors.
+    """
+    from backends.base import create_backend
+
+    backend = create_backend(args.backend, precision=args.precision, fallback=True)
+    try:
+        return render(backend), backend.name
+    except AberrantError as e:
+        if backend.name == FALLBACK_BACKEND or not _raised_by_backend(e, backend):
+            raise
+        failure = _brief(str(e))
+    finally:
+        backend.release()
+    print(
+        f"{PROG}: the {backend.name} backend failed ({failure}); falling back to the {FALLBACK_BACKEND} backend",
+        file=sys.stderr,
+    )
+    reference = create_backend(FALLBACK_BACKEND, fallback=False)
+    try:
+        return render(reference), reference.name
+    finally:
+        reference.release()
+
+
 def cmd_render(args: argparse.Namespace) -> int:
-    from backends.base import AOVS, create_backend
+    from backends.base import AOVS
     from engine.app import render_once
     from engine.scene_file import write_atomically
 
@@ -115,16 +179,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         if os.path.abspath(npz) == os.path.abspath(out):
             raise UsageError("--out and --aovs name the same file")
     scene = _load(args.scene)
+    aovs = AOVS if npz is not None else ("color",)
+
+    def render(backend: Backend) -> tuple[Frame, float]:
+        start = time.perf_counter()
+        frame = render_once(scene, backend, (width, height), aovs)
+        return frame, (time.perf_counter() - start) * 1e3
+
     try:
-        backend = create_backend(args.backend, precision=args.precision, fallback=True)
-        try:
-            aovs = AOVS if npz is not None else ("color",)
-            start = time.perf_counter()
-            frame = render_once(scene, backend, (width, height), aovs)
-            elapsed_ms = (time.perf_counter() - start) * 1e3
-            backend_name = backend.name
-        finally:
-            backend.release()
+        (frame, elapsed_ms), backend_name = _with_fallback(args, render)
     finally:
         scene.close()
     outputs = {out: _png_bytes(frame.aov("color"))}
@@ -141,7 +204,6 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_render_path(args: argparse.Namespace) -> int:
     """``render --path``: a flythrough walked by the real systems (engine/flythrough.py)."""
-    from backends.base import create_backend
     from engine.flythrough import check_output, path_for, render_flythrough
 
     if args.aovs:
@@ -153,16 +215,15 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     out = Path(args.out or "flythrough.gif")
     check_output(out)
     scene = _load(args.scene)
+
+    def render(backend: Backend) -> float:
+        start = time.perf_counter()
+        render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
+        return time.perf_counter() - start
+
     try:
         path = path_for(args.scene, scene)
-        backend = create_backend(args.backend, precision=args.precision, fallback=True)
-        try:
-            start = time.perf_counter()
-            render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
-            elapsed = time.perf_counter() - start
-            backend_name = backend.name
-        finally:
-            backend.release()
+        elapsed, backend_name = _with_fallback(args, render)
     finally:
         scene.close()
     print(f"wrote {out}")
@@ -222,6 +283,22 @@ def cmd_demos(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``bench``: speed against error for every backend and setting (engine/bench/)."""
+    from engine.bench import bench_command, make_config, rerender
+
+    if args.from_results:
+        for path in rerender(Path(args.from_results), Path(args.out)):
+            print(f"wrote {path}")
+        return 0
+    config = make_config(
+        scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
+        repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
+        command=" ".join([PROG, *(args.argv or [])]),
+    )  # fmt: skip
+    return bench_command(config)
+
+
 def cmd_editor(args: argparse.Namespace) -> int:
     """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
     try:
@@ -277,6 +354,37 @@ def build_parser() -> argparse.ArgumentParser:
     demos = sub.add_parser("demos", help="list the demos")
     demos.set_defaults(func=cmd_demos)
 
+    bench = sub.add_parser("bench", help="speed against error: every backend and setting on every scene, a report")
+    bench.add_argument(
+        "--scenes",
+        nargs="+",
+        default=None,
+        metavar="SCENE",
+        help="scene names or groups (all, bench, demos, hard, overhead); default all (--quick: a few)",
+    )
+    bench.add_argument(
+        "--backends", nargs="+", default=None, metavar="BACKEND", help="glsl, opencl, reference (default: glsl opencl)"
+    )
+    bench.add_argument("--size", default=None, help="WIDTHxHEIGHT (default 800x800; --quick 96x72)")
+    bench.add_argument("--repeat", type=int, default=None, help="timed frames per cell (default 5; --quick 3)")
+    bench.add_argument("--out", default="out/bench", help="folder for report.md, results.json, speed_vs_error.png")
+    bench.add_argument("--quick", action="store_true", help="small sizes, few scenes and sweeps (under two minutes)")
+    bench.add_argument(
+        "--sweeps",
+        nargs="+",
+        default=None,
+        metavar="SWEEP",
+        help="all, none, or: precision max_events size leaf workgroup tables local_size",
+    )
+    bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
+    bench.add_argument(
+        "--from-results",
+        default=None,
+        metavar="RESULTS.json",
+        help="only re-render report and plot from a results.json",
+    )
+    bench.set_defaults(func=cmd_bench)
+
     editor = sub.add_parser("editor", help="open the level editor (play mode included) on a scene file or demo")
     editor.add_argument("scene", metavar="SCENE|DEMO", nargs="?", default=None, help="a scene file or demo name")
     editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
@@ -295,8 +403,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as e:  # argparse's --help (0) and usage errors (2)
         return int(e.code or 0) if not isinstance(e.code, str) else 2
+    args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():
+            # numpy's "overflow encountered in ..." from extreme (but valid) scene values says nothing a user
+            # can act on; the tracers keep NaN and inf out of the image, so keep stderr for real messages.
+            warnings.filterwarnings("ignore", message=r".* encountered in ", category=RuntimeWarning)
+            return int(args.func(args))
     except AberrantError as e:
         print(f"{PROG}: error: {_one_line(str(e))}", file=sys.stderr)
         return 2

@@ -29,10 +29,14 @@ import contextlib
 import json
 import math
 import os
+import re
 import secrets
+import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from components import Aberration, Camera, Mesh, Portal, Transform, ValidationError
 from components.validation import vec3
@@ -182,7 +186,14 @@ class _Reader:
                 eye = vec3(position, "position")
                 if max(abs(a - b) for a, b in zip(eye, target, strict=True)) < 1e-12:
                     raise ValidationError("look_at", "the point looked at equals the camera position")
-                return tuple(float(c) for c in look_at_quat(eye, target))
+                try:
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        quat = look_at_quat(eye, target)
+                except ValueError:  # the difference overflows (points near ±1e308) or underflows
+                    quat = np.full(4, np.nan)
+                if not np.all(np.isfinite(quat)):
+                    raise ValidationError("look_at", "no direction from the camera position to this point (too far)")
+                return tuple(float(c) for c in quat)
         except ValidationError as e:
             raise self.fail(e.message, entity=entity, field=f"{field}.{e.field}") from None
         rotation = block.get("rotation", (0.0, 0.0, 0.0, 1.0))
@@ -369,7 +380,38 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
         raise SceneFileError(file, f"line {e.lineno}, column {e.colno}: malformed JSON: {e.msg}") from None
     except RecursionError:
         raise SceneFileError(file, "malformed JSON: nested too deeply") from None
+    except ValueError:  # an integer literal of more than 4300 digits (sys.int_max_str_digits)
+        raise SceneFileError(file, "malformed JSON: an integer literal is too long (over 4300 digits)") from None
+    where = _unencodable_string(doc)
+    if where is not None:  # "\ud800" is valid JSON but no Unicode text: it could never be saved again
+        raise SceneFileError(file, "a string holds a lone UTF-16 surrogate (\\ud800-\\udfff escape)", field=where)
     return _Reader(file).read(doc, Path(os.path.abspath(path)).parent)
+
+
+def _unencodable_string(doc: object) -> str | None:
+    """The path of the first key or string value that is not valid Unicode (a lone surrogate), or ``None``.
+
+    Iterative, so a deeply nested document cannot exhaust the stack here.
+    """
+    stack: list[tuple[str, object]] = [("", doc)]
+    while stack:
+        where, value = stack.pop()
+        if isinstance(value, str):
+            try:
+                value.encode("utf-8")
+            except UnicodeEncodeError:
+                return where or "(document)"
+        elif isinstance(value, dict):
+            for key, item in value.items():
+                child = f"{where}.{key}" if where else str(key)
+                try:
+                    key.encode("utf-8")
+                except UnicodeEncodeError:
+                    return child
+                stack.append((child, item))
+        elif isinstance(value, list):
+            stack.extend((f"{where}[{i}]", item) for i, item in enumerate(value))
+    return None
 
 
 # --- writing -----------------------------------------------------------------
@@ -498,17 +540,75 @@ def scene_to_json(scene: Scene, target_dir: Path | None = None) -> str:
     return dumps(scene_document(scene, target_dir)) + "\n"
 
 
+#: A temporary older than this is stale even if a process with its PID exists (the PID was reused).
+STALE_TEMP_SECONDS = 3600.0
+_TEMP_SUFFIX = re.compile(r"(\d+)-[0-9a-f]{8}\.tmp")
+
+
+def temp_path(path: Path) -> Path:
+    """The temporary sibling a save of ``path`` writes first: ``.NAME.PID-RANDOM.tmp`` (hidden, owner named)."""
+    return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
+
+
+def _process_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists on this machine (assume so where that cannot be asked safely)."""
+    if pid == os.getpid():
+        return True
+    if os.name != "posix":  # os.kill(pid, 0) would terminate the process on Windows
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # EPERM: it exists, owned by someone else
+        return True
+    return True
+
+
+def clean_stale_temps(path: Path) -> list[Path]:
+    """Remove the temporaries of ``path`` that a killed save left behind; returns what was removed.
+
+    A temporary is stale when the process named in it is gone (or it is
+    older than :data:`STALE_TEMP_SECONDS`); a save in progress in another
+    live process keeps its file.
+    """
+    prefix = f".{path.name}."
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(path.parent if str(path.parent) else "."))
+    except OSError:
+        return removed
+    now = time.time()
+    for entry in entries:
+        if not entry.name.startswith(prefix):
+            continue
+        match = _TEMP_SUFFIX.fullmatch(entry.name[len(prefix) :])
+        if match is None:
+            continue
+        try:
+            old = now - entry.stat(follow_symlinks=False).st_mtime > STALE_TEMP_SECONDS
+            if old or not _process_alive(int(match.group(1))):
+                os.unlink(entry.path)
+                removed.append(Path(entry.path))
+        except OSError:  # gone meanwhile, or not ours to remove: leave it
+            continue
+    return removed
+
+
 def write_atomically(outputs: Mapping[str | os.PathLike[str], bytes]) -> None:
     """Write each file via a temporary sibling, fsync, then rename over the target.
 
     All temporaries are written before any rename, so an error while writing
-    leaves every target untouched and no temporary behind.
+    leaves every target untouched and no temporary behind. A process killed
+    mid-save leaves the old file and at most a hidden ``.NAME.PID-RANDOM.tmp``,
+    which the next save of that file removes (:func:`clean_stale_temps`).
     """
     staged: list[tuple[str, Path]] = []
     try:
         for target, data in outputs.items():
             path = Path(target)
-            tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+            clean_stale_temps(path)
+            tmp = temp_path(path)
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # umask applies, like a normal file
             staged.append((str(tmp), path))
             with os.fdopen(fd, "wb") as f:
@@ -550,7 +650,15 @@ def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
         text = scene_to_json(scene, target_dir)
     except SceneError as e:
         raise SceneFileError(file, f"cannot save: {e.detail}", entity=e.entity, field=e.field) from None
+    except ValueError as e:  # a value JSON cannot hold (set by code; a loaded file never has one)
+        raise SceneFileError(file, f"cannot save: {e}") from None
     try:
-        write_atomically({path: text.encode("utf-8")})
+        data = text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise SceneFileError(file, f"cannot save: a name holds text that is not valid Unicode ({e.reason})") from None
+    try:
+        write_atomically({path: data})
     except OSError as e:
+        if not target_dir.is_dir():
+            raise SceneFileError(file, f"cannot save: the folder {str(target_dir)!r} does not exist") from e
         raise SceneFileError(file, f"cannot save ({e.strerror or e})") from e

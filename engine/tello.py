@@ -134,6 +134,10 @@ def read_tello_document(path: Path) -> dict[str, Any]:
         raise TelloError(file, f"not UTF-8 text (byte {e.start}): not a TelloEngine scene file") from None
     except json.JSONDecodeError as e:
         raise TelloError(file, f"line {e.lineno}, column {e.colno}: not JSON: {e.msg}") from None
+    except RecursionError:
+        raise TelloError(file, "not JSON: nested too deeply") from None
+    except ValueError:  # an integer literal of more than 4300 digits (sys.int_max_str_digits)
+        raise TelloError(file, "not JSON: an integer literal is too long (over 4300 digits)") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("game_objects"), list):
         raise TelloError(
             file, "expected an object with a 'game_objects' list: not a TelloEngine scene", field="game_objects"
@@ -253,11 +257,14 @@ class _Importer:
             position = vector(fields.get("position", [0, 0, 0]), 3, "position")
             rotation = vector(fields.get("rotation", [0, 0, 0, 1]), 4, "rotation")
             scale = vector(fields.get("scale", [1, 1, 1]), 3, "scale")
-            q = quat_normalize(rotation)
+            with np.errstate(all="ignore"):  # a length that overflows is reported below
+                q = quat_normalize(rotation)
         except ValidationError as e:
             raise self.fail(e.message, obj, f"components[{i}].{e.field}") from None
         except ValueError:
             raise self.fail("the rotation quaternion is zero", obj, f"components[{i}].rotation") from None
+        if not np.all(np.isfinite(q)) or abs(float(np.linalg.norm(q)) - 1.0) > 1e-6:  # its length overflowed
+            raise self.fail("the rotation quaternion cannot be normalised", obj, f"components[{i}].rotation")
         if min(abs(c) for c in scale) < 1e-12:
             raise self.fail("a scale component is zero (the object collapses)", obj, f"components[{i}].scale")
         return _Pose(np.array(position), q, np.array(scale))
@@ -274,17 +281,36 @@ class _Importer:
             if parent is None:
                 raise self.fail(f"no game object has uuid {obj.parent}", obj, "parent")
             pose = self.compose(obj, self.world_pose(parent, (*seen, obj.uuid)), pose)
+            if not all(np.all(np.isfinite(a)) for a in (pose.p, pose.q, pose.s)) or np.min(np.abs(pose.s)) < 1e-12:
+                raise self.fail(
+                    "its world transform overflows or collapses (the hierarchy's positions or scales are too large "
+                    "or too small)",
+                    obj,
+                    "parent",
+                )
         self.world[obj.uuid] = pose
         return pose
 
     def compose(self, obj: _Object, parent: _Pose, child: _Pose) -> _Pose:
         """``parent · child``: exact on (p, q, s) under a uniform parent scale, else via the matrix."""
+        with np.errstate(all="ignore"):  # huge or tiny values: the caller rejects a non-finite result
+            return self._compose(obj, parent, child)
+
+    def _compose(self, obj: _Object, parent: _Pose, child: _Pose) -> _Pose:
+        """:meth:`compose` without the errstate; a NaN pose when the product overflows (SVD would not converge)."""
+        nan = _Pose(np.full(3, np.nan), np.full(4, np.nan), np.full(3, np.nan))
+        if not np.all(np.isfinite(parent.s * child.s)) or not np.all(np.isfinite(parent.s * child.p)):
+            return nan
         if np.ptp(parent.s) <= 1e-12 * float(np.max(np.abs(parent.s))):
             position = parent.p + quat_to_matrix(parent.q) @ (parent.s * child.p)
             return _Pose(position, quat_normalize(quat_multiply(parent.q, child.q)), parent.s * child.s)
         m = parent.matrix @ child.matrix
+        if not np.all(np.isfinite(m)):
+            return nan
         linear = m[:3, :3]
         scale = np.linalg.norm(linear, axis=0)
+        if not np.all(np.isfinite(scale)) or np.min(scale) < 1e-300:
+            return nan
         if np.linalg.det(linear) < 0.0:
             scale[0] = -scale[0]
         rotation = linear / scale
@@ -348,7 +374,6 @@ class _Importer:
 
     def add_object(self, scene: Scene, obj: _Object, mesh_dir_out: Path, files: list[tuple[int, Path]]) -> None:
         name = self.names[obj.uuid]
-        pose = self.world[obj.uuid]
         parts: list[object] = []
         mesh_comp = obj.first(MESH)
         if mesh_comp is not None:
@@ -367,7 +392,7 @@ class _Importer:
         if portal_comp is not None:
             parts.append(self.portal(obj, portal_comp))
         if parts:
-            scene.create_entity(name, pose.transform(), *parts)
+            scene.create_entity(name, self.pose_transform(obj), *parts)
         aberration_comp = obj.first(ABERRATION)
         if aberration_comp is not None:
             fields = aberration_comp[1]
@@ -377,7 +402,16 @@ class _Importer:
                 deformation, "radial", "restore", debug_draw=debug if isinstance(debug, bool) else True
             )
             label = name if not parts else self.unique(scene, f"{name}_aberration")
-            scene.create_entity(label, pose.transform(BOX_CENTRE), aberration)  # bottom pivot -> our cube's centre
+            # bottom pivot -> our cube's centre
+            scene.create_entity(label, self.pose_transform(obj, BOX_CENTRE), aberration)
+
+    def pose_transform(self, obj: _Object, offset: np.ndarray | None = None) -> Transform:
+        """The object's world pose as our Transform; one that overflows is an error naming the object."""
+        try:
+            with np.errstate(all="ignore"):
+                return self.world[obj.uuid].transform(offset)
+        except ValueError as e:  # ValidationError: a non-finite position, a zero scale
+            raise self.fail(f"its world transform cannot be represented ({e})", obj, "transform") from None
 
     def unique(self, scene: Scene, base: str) -> str:
         taken = {scene.name_of(e) for e in scene.entities()} | set(self.names.values())
@@ -408,7 +442,7 @@ class _Importer:
 
     def add_camera(self, scene: Scene, camera_obj: _Object | None) -> None:
         if camera_obj is not None:
-            pose = self.world[camera_obj.uuid].transform()
+            pose = self.pose_transform(camera_obj)
             name = self.names[camera_obj.uuid]
             if name in {scene.name_of(e) for e in scene.entities()}:  # the camera object also holds a mesh/portal
                 name = self.unique(scene, f"{name}_camera")
@@ -427,16 +461,25 @@ class _Importer:
         as the thesis describes it). Without meshes it looks at the aberration
         and portal boxes from outside.
         """
-        low, high, has_meshes = self.bounds()
-        centre = np.round(0.5 * (low + high), 6) + 0.0
-        if has_meshes:
-            eye = centre - np.array([0.0, 0.0, 0.4 * (high[2] - low[2])])
-        else:
-            eye = centre - np.array([0.0, 0.0, 0.5 * (high[2] - low[2]) + 1.5 * float(np.max(high - low)) + 1.0])
-        if np.linalg.norm(eye - centre) < 1e-6:
-            eye = centre - np.array([0.0, 0.0, 5.0])
-        eye = np.round(eye, 6) + 0.0
-        rotation = look_at_quat(eye, centre)
+        with np.errstate(all="ignore"):  # overflowing bounds are reported below
+            low, high, has_meshes = self.bounds()
+            centre = np.round(0.5 * (low + high), 6) + 0.0
+            if has_meshes:
+                eye = centre - np.array([0.0, 0.0, 0.4 * (high[2] - low[2])])
+            else:
+                eye = centre - np.array([0.0, 0.0, 0.5 * (high[2] - low[2]) + 1.5 * float(np.max(high - low)) + 1.0])
+            if np.linalg.norm(eye - centre) < 1e-6:
+                eye = centre - np.array([0.0, 0.0, 5.0])
+            eye = np.round(eye, 6) + 0.0
+            try:
+                rotation = look_at_quat(eye, centre)
+            except ValueError:  # eye == centre in float: the scene is too far from the origin
+                rotation = np.full(4, np.nan)
+        if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(rotation))):
+            raise self.fail(
+                "the scene's bounds are too large (or too far from the origin) to place a default camera; "
+                "give one game object a Camera component"
+            )
         return tuple(float(c) for c in eye), tuple(float(c) + 0.0 for c in rotation)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -16,7 +16,7 @@ from backends.glsl.backend import CAMERA_IMAGE, GlslBackend, _write_texels
 from backends.shared import bvh_depth, stack_size
 from components import Transform
 from engine import layout
-from engine.errors import AberrantError, BackendUnavailable
+from engine.errors import AberrantError
 from engine.packing import CameraView, ScenePacker, scene_camera
 from engine.scene import Scene
 
@@ -489,12 +489,152 @@ def test_degenerate_triangles_and_edge_on_views_give_no_nan(glsl, tmp_path):
         assert not np.isnan(value).any() and np.all(np.isfinite(value[frame.instance >= 0]))
 
 
-def test_aberrations_and_portals_are_refused_until_the_core_traces_them(fresh_glsl):
+# --- specialisation: a variant compiles only what its scene uses -------------------------------------
+
+_DIRECTIVE = re.compile(r"^\s*#\s*(\w+)\s*(.*?)\s*$")
+
+
+def preprocess(source: str) -> str:
+    """The lines a compiler keeps after ``#if``/``#ifdef``/``#ifndef``/``#elif``/``#else``/``#endif``.
+
+    A small C preprocessor for the conditions the kernels use: object-like ``#define``s with
+    integer expressions, ``defined()``, ``!``, ``&&``, ``||`` and comparisons (undefined names are 0).
+    """
+    defines: dict[str, str] = {}
+
+    def evaluate(expr: str) -> int:
+        expr = re.sub(r"defined\s*\(\s*(\w+)\s*\)|defined\s+(\w+)", lambda m: str(int((m[1] or m[2]) in defines)), expr)
+        expr = expr.replace("&&", " and ").replace("||", " or ")
+        expr = re.sub(r"!(?!=)", " not ", expr)
+
+        def name(m: re.Match) -> str:
+            word = m.group(0)
+            if word in ("and", "or", "not"):
+                return word
+            return f"({evaluate(defines[word])})" if word in defines else "0"
+
+        return int(eval(re.sub(r"\b[A-Za-z_]\w*\b", name, expr), {"__builtins__": {}}))
+
+    kept: list[str] = []
+    stack: list[tuple[bool, bool]] = []  # (enclosing block active, a branch of this #if was taken)
+    active = True
+    for line in source.splitlines():
+        m = _DIRECTIVE.match(line)
+        word, rest = (m.group(1), m.group(2)) if m else ("", "")
+        if word in ("if", "ifdef", "ifndef"):
+            holds = bool(evaluate(rest)) if word == "if" else (rest in defines) == (word == "ifdef")
+            taken = active and holds
+            stack.append((active, taken))
+            active = taken
+        elif word == "elif":
+            outer, taken = stack[-1]
+            active = outer and not taken and bool(evaluate(rest))
+            stack[-1] = (outer, taken or active)
+        elif word == "else":
+            outer, taken = stack[-1]
+            active = outer and not taken
+            stack[-1] = (outer, True)
+        elif word == "endif":
+            active = stack.pop()[0]
+        elif active:
+            if word == "define":
+                d = re.match(r"(\w+)(\(?)\s*(.*)$", rest)
+                if d and not d.group(2):
+                    defines[d.group(1)] = d.group(3) or "1"
+            kept.append(line)
+    assert not stack, "unbalanced #if"
+    return "\n".join(kept)
+
+
+#: Functions of the non-Euclidean machinery, by what needs them.
+SPACE_FUNCTIONS = {
+    "aberrations": ("nearest_box_face", "containing_box", "transition", "enter_box", "perceived_rate"),
+    "metric": ("metric_direction", "metric_local"),
+    "bending": ("bend",),
+    "radial": ("sigma_axis",),
+    "portals": ("nearest_portal", "teleport"),
+}
+
+
+def compiled_functions(source: str) -> set[str]:
+    """The SPACE_FUNCTIONS a preprocessed source defines."""
+    text = re.sub(r"/\*.*?\*/|//[^\n]*", " ", preprocess(source), flags=re.S)
+    return {f for group in SPACE_FUNCTIONS.values() for f in group if re.search(rf"\b{f}\s*\(", text)}
+
+
+def expected_functions(modes: set[str], portals: bool) -> set[str]:
+    groups = []
+    if modes:
+        groups.append("aberrations")
+    if "metric" in modes:
+        groups.append("metric")
+    if modes & {"radial", "additive"}:
+        groups.append("bending")
+    if "radial" in modes:
+        groups.append("radial")
+    if portals:
+        groups.append("portals")
+    return {f for group in groups for f in SPACE_FUNCTIONS[group]}
+
+
+def test_preprocess_keeps_only_the_taken_branches():
+    text = preprocess(
+        "#define A 1\n#define B (A && !C)\n#if B\nyes\n#if defined(C) || A == 2\nno\n#elif A\nyes2\n#else\nno\n"
+        "#endif\n#else\nno\n#endif\n#ifndef C\nyes3\n#endif\n"
+    )
+    assert [line for line in text.splitlines() if not line.startswith("#")] == ["yes", "yes2", "yes3"]
+
+
+SPECIALISATIONS = [
+    pytest.param(set(), False, id="plain"),
+    pytest.param({"metric"}, False, id="metric"),
+    pytest.param({"radial"}, False, id="radial"),
+    pytest.param({"additive"}, False, id="additive"),
+    pytest.param({"metric", "radial", "additive"}, False, id="all-modes"),
+    pytest.param(set(), True, id="portals"),
+    pytest.param({"additive"}, True, id="additive-portals"),
+]
+
+
+@pytest.mark.parametrize(("modes", "portals"), SPECIALISATIONS)
+def test_a_variant_compiles_only_the_machinery_its_scene_uses(modes, portals):
+    """A plain scene's shader has no aberration or portal code at all; each mode brings only its own rules."""
+    from engine.packing import Features
+
+    defines = {**Features(portals, frozenset(modes)).defines(), "CAMERA_BINDING": 8, "TABLES_IN_IMAGES": 0}
+    assert compiled_functions(GlslBackend.source(defines)) == expected_functions(modes, portals)
+
+
+def test_each_feature_set_is_its_own_cached_variant(fresh_glsl):
+    """Plain, metric and portal scenes get variants whose defines say what they hold; each is compiled once."""
+    for build in (boxes_scene, _metric_scene, _portal_scene, boxes_scene, _metric_scene):
+        scene = build()
+        frame = render(fresh_glsl, scene, 16, 12, aovs=("color",))
+        assert frame.color is not None
+    assert fresh_glsl.compile_count == 3
+    defines = [dict(key) for key in fresh_glsl._programs]
+    flags = [
+        {k: d[k] for k in ("HAS_ABERRATIONS", "HAS_METRIC", "HAS_RADIAL", "HAS_ADDITIVE", "HAS_PORTALS")}
+        for d in defines
+    ]
+    assert flags == [
+        {"HAS_ABERRATIONS": 0, "HAS_METRIC": 0, "HAS_RADIAL": 0, "HAS_ADDITIVE": 0, "HAS_PORTALS": 0},
+        {"HAS_ABERRATIONS": 1, "HAS_METRIC": 1, "HAS_RADIAL": 0, "HAS_ADDITIVE": 0, "HAS_PORTALS": 0},
+        {"HAS_ABERRATIONS": 0, "HAS_METRIC": 0, "HAS_RADIAL": 0, "HAS_ADDITIVE": 0, "HAS_PORTALS": 1},
+    ]
+
+
+def _metric_scene() -> Scene:
     scene = boxes_scene()
     scene.add_aberration("squash", (0.5, 0.0, 0.0), scale=2.0)
-    upload(fresh_glsl, scene)
-    with pytest.raises(BackendUnavailable, match="aberrations"):
-        fresh_glsl.render(scene_camera(scene), 8, 8)
+    return scene
+
+
+def _portal_scene() -> Scene:
+    scene = boxes_scene()
+    scene.add_portal_pair("door_a", "door_b", a={"position": (0.0, 1.0, 2.0)}, b={"position": (50.0, 1.0, 0.0)})
+    scene.add_portal("loose", position=(1.0, 1.0, 1.0))  # unlinked: no portal code of its own
+    return scene
 
 
 def test_shader_source_is_assembled_from_the_shared_core():

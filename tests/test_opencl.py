@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import test_parity as parity
 from conftest import require_backend
+from test_glsl import SPECIALISATIONS, compiled_functions, expected_functions
 
 from backends import shared
 from backends.base import AOVS, backend_class
@@ -246,12 +247,32 @@ def test_release_is_idempotent_and_final():
         upload(backend, boxes_scene())
 
 
-def test_aberrations_and_portals_are_refused_until_the_core_traces_them(fresh_opencl):
-    scene = boxes_scene()
-    scene.add_aberration("squash", (0.5, 0.0, 0.0), scale=2.0)
-    upload(fresh_opencl, scene)
-    with pytest.raises(BackendUnavailable, match="aberrations"):
-        fresh_opencl.render(scene_camera(scene), 8, 8)
+@pytest.mark.parametrize(("modes", "portals"), SPECIALISATIONS)
+def test_a_variant_compiles_only_the_machinery_its_scene_uses(modes, portals):
+    """A plain scene's kernel has no aberration or portal code at all; each mode brings only its own rules."""
+    from engine.packing import Features
+
+    for precision in (0, 1):
+        defines = {**Features(portals, frozenset(modes)).defines(), "REAL_IS_DOUBLE": precision}
+        assert compiled_functions(OpenClBackend.source(defines)) == expected_functions(modes, portals)
+
+
+def test_each_feature_set_is_its_own_cached_variant(fresh_opencl):
+    """Plain, radial and portal-with-aberration scenes build one variant each, with the defines they need."""
+    radial = boxes_scene()
+    radial.add_aberration("bend", (0.3, 0.0, 0.0), mode="radial", scale=2.0)
+    both = boxes_scene()
+    both.add_aberration("squash", (0.5, 0.0, 0.0), scale=2.0)
+    both.add_portal_pair("door_a", "door_b", a={"position": (0.0, 1.0, 2.0)}, b={"position": (50.0, 1.0, 0.0)})
+    for scene in (boxes_scene(), radial, both, boxes_scene(), radial):
+        render(fresh_opencl, scene, 16, 12, aovs=("color",))
+    assert fresh_opencl.compile_count == 3
+    names = ("HAS_ABERRATIONS", "HAS_METRIC", "HAS_RADIAL", "HAS_ADDITIVE", "HAS_PORTALS")
+    assert [tuple(dict(key)[n] for n in names) for key in fresh_opencl._kernels] == [
+        (0, 0, 0, 0, 0),
+        (1, 0, 1, 0, 0),
+        (1, 1, 0, 0, 1),
+    ]
 
 
 def test_kernel_source_is_assembled_from_the_shared_core():

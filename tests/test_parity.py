@@ -10,7 +10,6 @@ on a miss).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -23,6 +22,7 @@ from backends.base import AOVS, Frame
 from backends.reference.backend import ReferenceBackend
 from components import Transform
 from demos import starter
+from engine.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from engine.packing import ScenePacker, scene_camera
 from engine.scene import Scene
 
@@ -40,9 +40,6 @@ DEPTH_MEDIAN_MAX = 1e-5
 DEPTH_P99_MAX = 1e-3
 #: f64 tracers must agree with the reference to this 99th-percentile relative depth error.
 F64_DEPTH_P99_MAX = 1e-9
-#: The far-from-origin scenes are moved by this (camera too): about 1e5 units, with fractions so the
-#: floating origin (a 16-unit grid) does not absorb the move exactly.
-FAR = (100000.37, -99999.61, 100000.173)
 
 
 # --- scenes ------------------------------------------------------------------------------------
@@ -84,79 +81,6 @@ def imported_mesh(folder: Path) -> Scene:
     scene.add_mesh("torus2", "torus", position=(1.2, -0.6, -2.5), euler_deg=(-20.0, 0.0, 35.0), color=(0.3, 0.6, 0.9))
     scene.add_mesh("floor", "plane", position=(0.0, -1.5, 0.0), scale=(20.0, 1.0, 20.0), checker=0.5)
     scene.set_camera((0.4, 1.2, 4.2), look_at=(0.0, -0.2, 0.0), fov_deg=55.0)
-    return scene
-
-
-def grid_cube(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The cube [-1/2, 1/2]^3, each face an n x n grid of quads with shared vertices and alternating diagonals."""
-    ids: dict[tuple[int, int, int], int] = {}
-    faces = []
-
-    def vertex(p: tuple[int, int, int]) -> int:
-        return ids.setdefault(p, len(ids))
-
-    for axis in range(3):
-        u_axis, v_axis = (axis + 1) % 3, (axis + 2) % 3
-        for side in (0, n):
-            for i in range(n):
-                for j in range(n):
-                    corners = []
-                    for du, dv in ((0, 0), (1, 0), (1, 1), (0, 1)):
-                        p = [0, 0, 0]
-                        p[axis], p[u_axis], p[v_axis] = side, i + du, j + dv
-                        corners.append(vertex((p[0], p[1], p[2])))
-                    a, b, c, d = corners if side == n else corners[::-1]
-                    faces += [(a, b, c), (a, c, d)] if (i + j) % 2 == 0 else [(a, b, d), (b, c, d)]
-    vertices = np.array(list(ids), dtype=np.float64) / n - 0.5
-    return vertices, np.array(faces)
-
-
-def grid_cube_ply(folder: Path, n: int = 64) -> Path:
-    path = folder / f"grid_cube{n}.ply"
-    if not path.exists():
-        vertices, faces = grid_cube(n)
-        mesh = trimesh.Trimesh(vertices, faces, process=False)
-        assert mesh.is_watertight and mesh.is_winding_consistent
-        mesh.export(path)
-    return path
-
-
-def inside_grid_cube(folder: Path, view: str) -> Scene:
-    """The camera at the centre of a closed 64 x 64-per-face grid cube of side 2: every ray must hit.
-
-    ``vertices``: 65 x 65 pixels whose centre rays pass through grid vertices (and, at the border,
-    through the cube's edges); ``diagonals``: 64 x 64 pixels whose rays cross cell centres, on the
-    shared diagonal edges; ``corner``: looking into a corner, rays along the faces' shared edges.
-    """
-    scene = Scene(f"watertight-{view}")
-    scene.add_asset("cube", path=grid_cube_ply(folder))
-    scene.add_mesh("cube", "cube", scale=2.0, color=(0.8, 0.8, 0.8), checker=0.3)
-    if view == "vertices":
-        scene.set_camera((0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), fov_deg=2 * math.degrees(math.atan(65 / 64)))
-    elif view == "diagonals":
-        scene.set_camera((0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), fov_deg=90.0)
-    else:
-        scene.set_camera((0.0, 0.0, 0.0), look_at=(1.0, 1.0, -1.0), fov_deg=100.0)
-    return scene
-
-
-def inside_sphere(folder: Path) -> Scene:
-    """The camera inside a placed, closed icosphere (20,480 triangles): every ray must hit."""
-    path = folder / "icosphere5.ply"
-    if not path.exists():
-        trimesh.creation.icosphere(subdivisions=5, radius=1.0).export(path)
-    scene = Scene("watertight-sphere")
-    scene.add_asset("sphere", path=path)
-    scene.add_mesh("sphere", "sphere", position=(0.1, -0.2, 0.05), euler_deg=(17.0, 41.0, -8.0), scale=(3.0, 2.0, 2.5))
-    scene.set_camera((0.2, 0.1, 0.3), look_at=(1.0, 0.5, -2.0), fov_deg=120.0)
-    return scene
-
-
-def translated(scene: Scene, offset: tuple[float, float, float]) -> Scene:
-    """The scene with every transform (camera included) moved by ``offset``."""
-    for entity, transform in scene.query(Transform):
-        position = tuple(float(p + o) for p, o in zip(transform.position, offset, strict=True))
-        scene.set(entity, replace(transform, position=position))
     return scene
 
 

@@ -23,7 +23,7 @@ def run_make(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
 
 
 @needs_make
-@pytest.mark.parametrize("target", ["test", "demo", "bench", "lint", "clean", "setup", "help"])
+@pytest.mark.parametrize("target", ["test", "demo", "bench", "bench-pytest", "gallery", "lint", "clean", "setup", "help"])
 def test_make_targets_parse(target):
     result = run_make("-n", target)
     assert result.returncode == 0, result.stderr
@@ -36,8 +36,13 @@ def test_make_demo_renders_the_starter_scene():
 
 
 @needs_make
-def test_make_bench_runs_benchmarks_despite_skip_in_addopts():
+def test_make_bench_writes_the_report():
     plan = run_make("-n", "bench").stdout
+    assert "aberrant\" bench --out out/bench" in plan
+
+
+def test_make_bench_pytest_runs_benchmarks_despite_skip_in_addopts():
+    plan = run_make("-n", "bench-pytest").stdout
     assert "--benchmark-only" in plan
 
 
@@ -62,7 +67,7 @@ def test_install_is_stamped_on_pyproject(tmp_path):
     os.utime(tmp_path / "pyproject.toml")  # now newer than the stamp
     stale = run_make("-n", "test", cwd=tmp_path)
     assert stale.returncode == 0, stale.stderr
-    assert "pip install -q -e '.[dev,glsl,opencl,editor]'" in stale.stdout
+    assert "pip install -q -e '.[dev,glsl,opencl,editor,bench]'" in stale.stdout
     assert "-m venv" not in stale.stdout  # the venv itself is kept
 
 

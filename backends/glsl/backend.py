@@ -377,17 +377,7 @@ class GlslBackend(Backend):
 
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Dispatch one frame; reads back only the requested AOVs (``aovs=()``: the texture only)."""
-        if not self._uploaded:
-            raise AberrantError("glsl backend: render() before upload(); upload a packed scene first")
-        unknown = [a for a in aovs if a not in AOVS]
-        if unknown:
-            raise AberrantError(f"unknown AOV(s) {', '.join(map(repr, unknown))}; AOVs are {', '.join(AOVS)}")
-        width, height = int(width), int(height)
-        if width <= 0 or height <= 0:
-            raise AberrantError(f"image size must be positive, got {width}x{height}")
-        unsupported = shared.unsupported(self._features)
-        if unsupported:
-            raise BackendUnavailable(f"the glsl backend does not trace {unsupported} yet; use the reference backend")
+        width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
         start = time.perf_counter()
         with self._current():
             ctx = self._context()

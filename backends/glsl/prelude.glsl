@@ -14,6 +14,8 @@
 #define real4 dvec4
 #define REAL_MAX 1.0e300lf
 #define REAL_TINY 1.0e-300lf
+/* A real literal written without a suffix: REAL_C(1.0e-9) is the double nearest 1e-9. */
+#define REAL_C(x) x##lf
 #else
 #define real float
 #define real2 vec2
@@ -21,6 +23,7 @@
 #define real4 vec4
 #define REAL_MAX 3.0e38
 #define REAL_TINY 1.0e-30
+#define REAL_C(x) x##f
 #endif
 #define float2 vec2
 #define float3 vec3

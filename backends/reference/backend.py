@@ -110,14 +110,10 @@ class ReferenceBackend(Backend):
 
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Trace one frame; only the requested AOVs are filled."""
-        if self._geometry is None or self._settings is None:
-            raise AberrantError("reference backend: render() before upload(); upload a packed scene first")
-        unknown = [a for a in aovs if a not in AOVS]
-        if unknown:
-            raise AberrantError(f"unknown AOV(s) {', '.join(map(repr, unknown))}; AOVs are {', '.join(AOVS)}")
-        width, height = int(width), int(height)
-        if width <= 0 or height <= 0:
-            raise AberrantError(f"image size must be positive, got {width}x{height}")
+        width, height = self.check_request(
+            width, height, aovs, uploaded=self._geometry is not None and self._settings is not None
+        )
+        assert self._geometry is not None and self._settings is not None
         start = time.perf_counter()
         directions = camera.primary_directions(width, height).reshape(-1, 3)
         origin = np.asarray(camera.position, dtype=np.float64) - self._origin

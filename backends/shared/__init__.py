@@ -17,12 +17,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from importlib import resources
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from engine.packing import Features
 
 #: Files of the shared core, in the order they are concatenated (the prelude goes before them).
 CORE_FILES: tuple[str, ...] = ("layout.h", "core.h")
@@ -86,13 +82,3 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
 def stack_size(nodes: np.ndarray, count: int) -> int:
     """``BVH_STACK_SIZE`` for a node table: every tree's depth fits, rounded up so few variants exist."""
     return max(MIN_STACK, -(-bvh_depth(nodes, count) // 16) * 16)
-
-
-def unsupported(features: Features) -> str:
-    """What a scene needs that the shared core cannot trace yet ('' when nothing)."""
-    missing = []
-    if features.aberration_modes:
-        missing.append("aberrations (issue 5)")
-    if features.portals:
-        missing.append("portals (issue 6)")
-    return " or ".join(missing)

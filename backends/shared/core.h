@@ -10,7 +10,8 @@
  *               float2..4 int2..4, double (only used under EDGE_FALLBACK_FP64 /
  *               WORLD_FP64)
  *   values      REAL(x) R2 R3 R4 R3S(splat) F3 F4, REAL_MAX (huge finite),
- *               REAL_TINY, F_INF (+inf as a float)
+ *               REAL_TINY, F_INF (+inf as a float), REAL_C(x) (a literal written
+ *               without suffix, as a real: exact in double, e.g. REAL_C(1.0e-9))
  *   casts       TO_REAL TO_REAL3 (from float3) TO_FLOAT TO_FLOAT3 TO_INT TO_DOUBLE,
  *               AS_INT / AS_FLOAT (bit reinterpretation)
  *   helpers     ABS (float abs, scalar or vector), VIDX3(v, i) (component i of
@@ -21,7 +22,10 @@
  *               (records, from the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
- *   HAS_PORTALS HAS_ABERRATIONS HAS_METRIC HAS_RADIAL HAS_ADDITIVE MAX_EVENTS
+ *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
+ *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions (issue 5)
+ *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
+ *   MAX_EVENTS         events a ray may take (the settings' max_events, which it bounds)
  *   REAL_IS_DOUBLE     trace in double precision
  *   EDGE_FALLBACK_FP64 float tracer: recompute an edge function that is exactly
  *                      0 in double (exact: a product of two floats fits a double)
@@ -62,15 +66,52 @@
 #define BVH_STACK_SIZE 64
 #endif
 
-#if REAL_IS_DOUBLE
-/* Hits at t <= T_MIN_RELATIVE * max(1, |o|) are ignored (the reference's value). */
-#define T_MIN_RELATIVE 1.0e-9f
-/* A box's exit t is widened by this fraction of itself: rounding never loses a hit on a face. */
-#define BOX_WIDEN 4.0e-16f
-#else
-#define T_MIN_RELATIVE 1.0e-6f
-#define BOX_WIDEN 4.8e-7f
+#ifndef HAS_METRIC
+#define HAS_METRIC 0
 #endif
+#ifndef HAS_RADIAL
+#define HAS_RADIAL 0
+#endif
+#ifndef HAS_ADDITIVE
+#define HAS_ADDITIVE 0
+#endif
+/* Anything that bends or teleports rays: the journey has more than one leg. */
+#define HAS_SPACE (HAS_ABERRATIONS || HAS_PORTALS)
+/* Box modes that bend the perceived direction w (entry and exit rules). */
+#define HAS_BENDING (HAS_RADIAL || HAS_ADDITIVE)
+
+/* Tolerances of docs/semantics.md section 2, relative to the size of the coordinates (at least 1):
+ * hits at t <= T_MIN_RELATIVE * max(1, |p|) past the point p the ray leaves are ignored; candidates
+ * within TIE_RELATIVE * max(1, |o| + t) of the nearest one are tied; the active box after an event is
+ * looked up NUDGE_RELATIVE * max(1, |p|) past the event point. Double: the reference's values.
+ * Float (camera-relative coordinates, |p| mostly below 30): the same relations (tie = 2 t_min,
+ * nudge > t_min) at about 80 float epsilons for t_min ("float32 backends" in docs/semantics.md). */
+#if REAL_IS_DOUBLE
+#define T_MIN_RELATIVE REAL_C(1.0e-9)
+#define TIE_RELATIVE REAL_C(2.0e-9)
+#define NUDGE_RELATIVE REAL_C(1.0e-8)
+/* A box's exit t is widened by this fraction of itself: rounding never loses a hit on a face. */
+#define BOX_WIDEN REAL_C(4.0e-16)
+#else
+#define T_MIN_RELATIVE REAL_C(1.0e-5)
+#define TIE_RELATIVE REAL_C(2.0e-5)
+#define NUDGE_RELATIVE REAL_C(5.0e-5)
+#define BOX_WIDEN REAL_C(4.8e-7)
+#endif
+/* A vector shorter than this is not normalised: the previous direction is kept (no NaN ever). */
+#define MIN_NORM REAL_C(1.0e-12)
+/* Radial mode: an axis whose corner-ray range is narrower than this uses sigma_k = sign(v_k). */
+#define COLLAPSED_RANGE REAL_C(1.0e-6)
+
+/* Aberration modes and exit rules (engine.layout.ABERRATION_MODES / ABERRATION_EXITS). */
+#define MODE_METRIC 0
+#define MODE_RADIAL 1
+#define MODE_ADDITIVE 2
+#define EXIT_RESTORE 0
+#define EXIT_REPEAT 1
+#define EXIT_INVERT 2
+/* Faces per box: face id = 6 * row + 2 * axis + (1 on the +1/2 side, 0 on the -1/2 side). */
+#define BOX_FACES 6
 
 /* Event kinds (DESIGN.md section 5). */
 #define EVENT_NONE 0
@@ -80,18 +121,25 @@
 
 /* --- records of the journey ------------------------------------------------------ */
 
-/* The state a ray carries (DESIGN.md section 5). Coordinates are camera-relative. */
+/* The state a ray carries (DESIGN.md section 5, docs/semantics.md section 1). Coordinates are
+ * camera-relative. A leg is a straight piece of the journey: o and r change only when the direction
+ * does (a bend, a portal), so a box face that leaves r as it is (D = 0, a ray along a metric box's
+ * axis) splits nothing: later hits on the leg are found from the same o and come out bit-identical
+ * to a scene without that box. Events on a leg are at t_from along it. */
 STRUCT_BEGIN(Ray)
-    real3 o;          /* origin */
+    real3 o;          /* origin of the leg */
     real3 r;          /* world direction */
     real3 w;          /* perceived direction (unit) */
     real3 d0;         /* primary direction, carried through portals (the "restore" exit rule) */
-    real L;           /* path length: world units travelled */
-    real Lambda;      /* perceived length */
+    real L;           /* path length at o: world units travelled */
+    real Lambda;      /* perceived length at o + t_piece r */
+    real t_from;      /* t along the leg of the last event on it (0: none, the ray leaves o) */
+    real t_piece;     /* t along the leg where the perceived rate f last changed */
+    real f;           /* perceived length per world length since t_piece (docs/semantics.md rule 4) */
     int aberration;   /* active aberration row, -1 for none */
     int n;            /* event count */
     int leaving_kind; /* the surface the ray is leaving (EVENT_ABERRATION / EVENT_PORTAL), -1 none */
-    int leaving;      /* ... and its row */
+    int leaving;      /* ... and its id: box face id (BOX_FACES * row + face) or portal row */
 STRUCT_END(Ray)
 
 /* The nearest mesh hit: t along r, barycentric weights of v0, v1, v2, instance row and triangle (-1: none). */
@@ -138,7 +186,10 @@ real3 safe_inverse(real3 d)
     return R3(REAL(1.0f) / x, REAL(1.0f) / y, REAL(1.0f) / z);
 }
 
-/* Entry and exit t of a ray against a box; the exit is widened a few ulps (conservative). */
+/* Entry and exit t of a ray against a box; the exit is widened a few ulps (conservative). The
+ * widening is at least BOX_WIDEN * REAL_TINY: an exit a hair from 0 (a ray starting on a bound,
+ * common where a mesh is split at a coordinate plane through the camera) would otherwise make a
+ * subnormal product, which costs a CPU a microcode assist per lane without flush-to-zero. */
 real2 slab(real3 o, real3 inv, real3 lo, real3 hi)
 {
     real3 t0 = (lo - o) * inv;
@@ -147,7 +198,7 @@ real2 slab(real3 o, real3 inv, real3 lo, real3 hi)
     real3 tf = max(t0, t1);
     real t_enter = max(max(tn.x, tn.y), tn.z);
     real t_exit = min(min(tf.x, tf.y), tf.z);
-    return R2(t_enter, t_exit + ABS(t_exit) * REAL(BOX_WIDEN));
+    return R2(t_enter, t_exit + max(ABS(t_exit), REAL_TINY) * BOX_WIDEN);
 }
 
 /* Whether a slab interval is crossed within (t_min, t_max]; false on NaN. */
@@ -450,7 +501,316 @@ float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 position)
     return mat.color.xyz * (factor * (ambient + (1.0f - ambient) * lambert));
 }
 
-/* --- the journey (DESIGN.md section 5) -------------------------------------------------- */
+/* --- vectors of the journey (docs/semantics.md rule 11) ------------------------------------- */
+
+#if HAS_SPACE
+/* The affine map with rows m0, m1, m2 (3x4) applied to a point. */
+real3 affine_point(real4 m0, real4 m1, real4 m2, real3 p)
+{
+    return R3(dot(m0.xyz, p) + m0.w, dot(m1.xyz, p) + m1.w, dot(m2.xyz, p) + m2.w);
+}
+
+/* The linear part of the map with rows m0, m1, m2 applied to a vector. */
+real3 linear_vector(real4 m0, real4 m1, real4 m2, real3 v)
+{
+    return R3(dot(m0.xyz, v), dot(m1.xyz, v), dot(m2.xyz, v));
+}
+
+/* v scaled to unit length; previous where |v| < MIN_NORM or |v| is not finite (directions.normalize_or_keep). */
+real3 normalize_or_keep(real3 v, real3 previous)
+{
+    real len = length(v);
+    return (len >= MIN_NORM && len < REAL_MAX) ? v / len : previous;
+}
+
+bool same_direction(real3 a, real3 b)
+{
+    return a.x == b.x && a.y == b.y && a.z == b.z;
+}
+
+/* Candidates within this of the nearest (at t from o) are tied: |o| + t bounds the event point's size. */
+real tie_window(real3 o, real t)
+{
+    return TIE_RELATIVE * max(REAL(1.0f), length(o) + t);
+}
+#endif
+
+/* --- aberrations (DESIGN.md section 6, docs/semantics.md rules 3-9; reference/aberrations.py) --- */
+
+#if HAS_ABERRATIONS
+/* Entry and exit of a ray through the unit box, built axis by axis (aberrations.slab_faces). */
+STRUCT_BEGIN(BoxSpan)
+    real t_near;
+    real t_far;
+    int near_face;
+    int far_face;
+STRUCT_END(BoxSpan)
+
+/* Axis k of the slab test: a, v the local origin and direction components. An axis with v = 0 is
+ * inside its slab for every t when |a| <= 1/2 (closed box) and nowhere otherwise; equal entries
+ * keep the lower axis (strict comparisons). */
+BoxSpan box_axis(BoxSpan span, real a, real v, int k)
+{
+    if (v != REAL(0.0f)) {
+        bool up = v > REAL(0.0f);
+        real t_minus = (REAL(-0.5f) - a) / v;
+        real t_plus = (REAL(0.5f) - a) / v;
+        real tn = up ? t_minus : t_plus;
+        real tf = up ? t_plus : t_minus;
+        if (tn > span.t_near) {
+            span.t_near = tn;
+            span.near_face = up ? 2 * k : 2 * k + 1;
+        }
+        if (tf < span.t_far) {
+            span.t_far = tf;
+            span.far_face = up ? 2 * k + 1 : 2 * k;
+        }
+    } else if (!(ABS(a) <= REAL(0.5f))) {
+        span.t_near = REAL_MAX;
+        span.t_far = -REAL_MAX;
+    }
+    return span;
+}
+
+/* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
+ * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
+ * lower row, then the entry face. */
+Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+{
+    Event best;
+    best.t = REAL_MAX;
+    best.kind = EVENT_NONE;
+    best.row = -1;
+    int count = SETTINGS.counts.y;
+    for (int b = 0; b < count; ++b) {
+        Aberration box = ABERRATION(b);
+        real3 a = affine_point(box.w2l0, box.w2l1, box.w2l2, o);
+        real3 v = linear_vector(box.w2l0, box.w2l1, box.w2l2, r);
+        BoxSpan span;
+        span.t_near = -REAL_MAX;
+        span.t_far = REAL_MAX;
+        span.near_face = -1;
+        span.far_face = -1;
+        span = box_axis(span, a.x, v.x, 0);
+        span = box_axis(span, a.y, v.y, 1);
+        span = box_axis(span, a.z, v.z, 2);
+        if (span.t_near <= span.t_far) {
+            int id = BOX_FACES * b + span.near_face;
+            if (span.near_face >= 0 && span.t_near > t_min && span.t_near < best.t && id != skip) {
+                best.t = span.t_near;
+                best.kind = EVENT_ABERRATION;
+                best.row = id;
+            }
+            id = BOX_FACES * b + span.far_face;
+            if (span.far_face >= 0 && span.t_far > t_min && span.t_far < best.t && id != skip) {
+                best.t = span.t_far;
+                best.kind = EVENT_ABERRATION;
+                best.row = id;
+            }
+        }
+    }
+    return best;
+}
+
+/* The active box at a point: the last row whose closed unit box contains it, -1 for none
+ * (aberrations.containing_box; rows are sorted by priority, then entity). */
+int containing_box(SCENE_DECL real3 p)
+{
+    int found = -1;
+    int count = SETTINGS.counts.y;
+    for (int b = 0; b < count; ++b) {
+        Aberration box = ABERRATION(b);
+        real3 q = affine_point(box.w2l0, box.w2l1, box.w2l2, p);
+        if (ABS(q.x) <= REAL(0.5f) && ABS(q.y) <= REAL(0.5f) && ABS(q.z) <= REAL(0.5f)) {
+            found = b;
+        }
+    }
+    return found;
+}
+
+/* The active box just past the point o + t r (NUDGE_RELATIVE of its size further along r). */
+int box_after(SCENE_DECL real3 o, real3 r, real t)
+{
+    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), length(o) + t);
+    return containing_box(SCENE_PASS o + (t + nudge) * r);
+}
+
+bool zero_deformation(Aberration box)
+{
+    return box.deformation.x == REAL(0.0f) && box.deformation.y == REAL(0.0f) && box.deformation.z == REAL(0.0f);
+}
+
+#if HAS_METRIC
+/* s (.) (R^T w) in box axes, s = 1 + D (aberrations._metric_local); rot rows are R's rows. */
+real3 metric_local(Aberration box, real3 w)
+{
+    real3 axes = w.x * box.rot0.xyz + w.y * box.rot1.xyz + w.z * box.rot2.xyz;
+    return (R3S(1.0f) + box.deformation.xyz) * axes;
+}
+
+/* r = normalize(R (s (.) R^T w)) (aberrations.world_direction); previous if degenerate. A box with
+ * D = 0 leaves the unit w as it is (renormalising would only add rounding). */
+real3 metric_direction(Aberration box, real3 w, real3 previous)
+{
+    if (zero_deformation(box)) {
+        return w;
+    }
+    real3 scaled = metric_local(box, w);
+    real3 world = R3(dot(box.rot0.xyz, scaled), dot(box.rot1.xyz, scaled), dot(box.rot2.xyz, scaled));
+    return normalize_or_keep(world, previous);
+}
+#endif
+
+/* Perceived length per world length (aberrations.perceived_per_world): 1 / |s (.) R^T w| in a metric
+ * box (0 where the norm overflows), 1 elsewhere and in a box with D = 0. */
+real perceived_rate(SCENE_DECL int row, real3 w)
+{
+#if HAS_METRIC
+    if (row >= 0) {
+        Aberration box = ABERRATION(row);
+        if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
+            real norm = length(metric_local(box, w));
+            return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
+        }
+    }
+#endif
+    return REAL(1.0f);
+}
+
+#if HAS_BENDING
+#if HAS_RADIAL
+/* One axis of sigma: 2 smoothstep(lo, hi, v) - 1, or sign(v) where the range collapsed. */
+real sigma_axis(real v, real lo, real hi)
+{
+    real span = hi - lo;
+    if (span < COLLAPSED_RANGE) {
+        return v > REAL(0.0f) ? REAL(1.0f) : (v < REAL(0.0f) ? REAL(-1.0f) : REAL(0.0f));
+    }
+    real u = clamp((v - lo) / span, REAL(0.0f), REAL(1.0f));
+    return REAL(2.0f) * (u * u * (REAL(3.0f) - REAL(2.0f) * u)) - REAL(1.0f);
+}
+#endif
+
+/* The entry rule of a radial/additive box with scale * D (scale = 1 or -1) applied to w (aberrations.bend): radial
+ * normalize(w + D (.) sigma(w)), additive normalize(w + D); w kept where the sum degenerates, and
+ * where nothing is added (w is unit already). lo, hi: the camera's sigma bounds. */
+real3 bend(Aberration box, real3 w, real scale, real3 lo, real3 hi)
+{
+    real3 offset = scale * box.deformation.xyz;
+#if HAS_RADIAL
+    if (box.meta.x == MODE_RADIAL) {
+        offset = offset * R3(sigma_axis(w.x, lo.x, hi.x), sigma_axis(w.y, lo.y, hi.y), sigma_axis(w.z, lo.z, hi.z));
+    }
+#endif
+    if (offset.x == REAL(0.0f) && offset.y == REAL(0.0f) && offset.z == REAL(0.0f)) {
+        return w;
+    }
+    return normalize_or_keep(w + offset, w);
+}
+#endif
+
+/* The perceived and world directions after a transition, and the new perceived rate. */
+STRUCT_BEGIN(Turn)
+    real3 w;
+    real3 r;
+    real f;
+STRUCT_END(Turn)
+
+/* The transition from box old to box next (aberrations.transition; -1 for none), lo/hi the sigma
+ * bounds: 1. leaving a bending box, its exit rule sets w (restore: d0, repeat: its entry rule
+ * again, invert: with -D); 2. entering a bending box, its entry rule bends w; 3. r follows from w
+ * by the new box (metric) or is w. */
+Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, real3 d0, real3 lo, real3 hi)
+{
+#if HAS_BENDING
+    if (old != next) {
+        if (old >= 0) {
+            Aberration box = ABERRATION(old);
+            if (box.meta.x != MODE_METRIC) {
+                int rule = box.meta.y;
+                w = rule == EXIT_RESTORE ? d0 : bend(box, w, rule == EXIT_INVERT ? REAL(-1.0f) : REAL(1.0f), lo, hi);
+            }
+        }
+        if (next >= 0) {
+            Aberration box = ABERRATION(next);
+            if (box.meta.x != MODE_METRIC) {
+                w = bend(box, w, REAL(1.0f), lo, hi);
+            }
+        }
+    }
+#endif
+    Turn turn;
+    turn.w = w;
+    turn.r = w;
+#if HAS_METRIC
+    if (next >= 0) {
+        Aberration box = ABERRATION(next);
+        if (box.meta.x == MODE_METRIC) {
+            turn.r = metric_direction(box, w, r);
+        }
+    }
+#endif
+    turn.f = perceived_rate(SCENE_PASS next, turn.w);
+    return turn;
+}
+#endif
+
+/* --- portals (DESIGN.md section 7, docs/semantics.md rules 3 and 10; reference/portals.py) -------- */
+
+#if HAS_PORTALS
+/* The nearest linked portal quad the ray passes through with t_min < t (portals.nearest_portal_hits):
+ * kind EVENT_PORTAL, t = REAL_MAX for none. The closed quad |x|, |y| <= 1 at z = 0, two-sided; a ray
+ * parallel to its plane never hits; the portal being left (skip) and unlinked ones never count; ties
+ * go to the lower row. */
+Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+{
+    Event best;
+    best.t = REAL_MAX;
+    best.kind = EVENT_NONE;
+    best.row = -1;
+    int count = SETTINGS.counts.z;
+    for (int p = 0; p < count; ++p) {
+        Portal portal = PORTAL(p);
+        if (portal.meta.x >= 0 && p != skip) {
+            real3 a = affine_point(portal.w2l0, portal.w2l1, portal.w2l2, o);
+            real3 v = linear_vector(portal.w2l0, portal.w2l1, portal.w2l2, r);
+            if (v.z != REAL(0.0f)) {
+                real t = -a.z / v.z;
+                real x = a.x + t * v.x;
+                real y = a.y + t * v.y;
+                if (t > t_min && t < best.t && ABS(x) <= REAL(1.0f) && ABS(y) <= REAL(1.0f)) {
+                    best.t = t;
+                    best.kind = EVENT_PORTAL;
+                    best.row = p;
+                }
+            }
+        }
+    }
+    return best;
+}
+
+/* Through portal row at t along the leg (portals.teleport): the segment's length is added, then the
+ * hit point goes through X and r, w, d0 through its linear part (renormalised, kept if degenerate);
+ * a new leg starts on the target quad, which the ray is then leaving. The active box is the caller's. */
+Ray teleport(SCENE_DECL Ray ray, int row, real t)
+{
+    real len_r = length(ray.r);
+    ray.L = ray.L + t * len_r;
+    ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
+    Portal portal = PORTAL(row);
+    ray.o = affine_point(portal.transfer0, portal.transfer1, portal.transfer2, ray.o + t * ray.r);
+    ray.r = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.r), ray.r);
+    ray.w = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.w), ray.w);
+    ray.d0 = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.d0), ray.d0);
+    ray.t_from = REAL(0.0f);
+    ray.t_piece = REAL(0.0f);
+    ray.leaving_kind = EVENT_PORTAL;
+    ray.leaving = portal.meta.x;
+    return ray;
+}
+#endif
+
+/* --- the journey (DESIGN.md section 5, docs/semantics.md sections 3-13) -------------------------- */
 
 /* The primary ray through pixel (i, j), row 0 = top (DESIGN.md section 3): the camera-space
  * vector normalised, then rotated (never a difference of two world points). */
@@ -469,24 +829,45 @@ Ray primary_ray(Camera cam, int i, int j)
     ray.d0 = d;
     ray.L = REAL(0.0f);
     ray.Lambda = REAL(0.0f);
+    ray.t_from = REAL(0.0f);
+    ray.t_piece = REAL(0.0f);
+    ray.f = REAL(1.0f);
     ray.aberration = -1;
     ray.n = 0;
     ray.leaving_kind = -1;
     ray.leaving = -1;
-#if HAS_RADIAL || HAS_ADDITIVE
-    /* STUB (issue 5): a camera inside a radial/additive box pre-deforms primary rays. */
-#endif
     return ray;
 }
 
-/* Perceived length per world length along the ray's current direction: 1 outside every box. */
-real perceived_per_world(SCENE_DECL Ray ray)
-{
 #if HAS_ABERRATIONS
-    /* STUB (issue 5): 1 / |s (.) R^T w| inside a metric box. */
-#endif
-    return REAL(1.0f);
+/* After an event that left the ray at t along its leg (a box face) or at a new leg's start (a portal,
+ * t = 0): the active box just past that point, the transition into it (rule 7), and a new leg where
+ * the direction changed. Lambda is closed off where the perceived rate changes. */
+Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
+{
+    int next = box_after(SCENE_PASS ray.o, ray.r, t);
+    Turn turn = transition(SCENE_PASS ray.aberration, next, ray.w, ray.r, ray.d0, lo, hi);
+    real len_r = length(ray.r);
+    if (same_direction(turn.r, ray.r)) {
+        if (turn.f != ray.f) {
+            ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
+            ray.t_piece = t;
+        }
+        ray.t_from = t;
+    } else {
+        ray.L = ray.L + t * len_r;
+        ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
+        ray.o = ray.o + t * ray.r;
+        ray.r = turn.r;
+        ray.t_from = REAL(0.0f);
+        ray.t_piece = REAL(0.0f);
+    }
+    ray.w = turn.w;
+    ray.f = turn.f;
+    ray.aberration = next;
+    return ray;
 }
+#endif
 
 Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 {
@@ -497,49 +878,92 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     px.perceived = F_INF;
     px.instance = -1;
     px.events = 0;
-    int max_events = min(SETTINGS.counts.w, MAX_EVENTS);
+#if HAS_ABERRATIONS
+    /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
+    real3 sigma_lo = cam.sigma_min.xyz;
+    real3 sigma_hi = cam.sigma_max.xyz;
+    ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
+#endif
+    int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
     /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
         if (ray.n >= max_events) {
             px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
             break;
         }
-        real t_min = REAL(T_MIN_RELATIVE) * max(REAL(1.0f), length(ray.o));
-        /* 1. The nearest of: a mesh triangle, an aberration box face, a portal quad. */
-        MeshHit mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, REAL_MAX);
-        Event ev;
-        ev.kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
-        ev.t = mesh.t;
-        ev.row = mesh.instance;
-#if HAS_ABERRATIONS
-        /* STUB (issue 5): the nearest aberration box face with t < ev.t, skipping
-         * (ray.leaving_kind, ray.leaving), replaces ev (kind EVENT_ABERRATION). */
-#error "aberrations are not traced by the shared core yet (issue 5)"
-#endif
+        /* 1. The nearest of: a linked portal quad, a box face, a mesh triangle, past the point the ray
+         * leaves (t_from along the leg) by t_min, skipping the surface it leaves. */
+        real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), length(ray.o) + ray.t_from);
+        real t_cut = REAL_MAX;
 #if HAS_PORTALS
-        /* STUB (issue 6): the nearest linked portal quad with t < ev.t, skipping
-         * (ray.leaving_kind, ray.leaving), replaces ev (kind EVENT_PORTAL). */
-#error "portals are not traced by the shared core yet (issue 6)"
+        Event portal = nearest_portal(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
+        t_cut = portal.t;
+#endif
+#if HAS_ABERRATIONS
+        Event face = nearest_box_face(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
+        if (face.t < REAL_MAX) {
+            t_cut = min(t_cut, face.t + tie_window(ray.o, face.t));
+        }
+#endif
+        /* The mesh search stops where a mesh can no longer win. */
+        MeshHit mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
+        int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
+#if HAS_SPACE
+        /* Candidates within the tie window of the nearest are tied: portal, then mesh, then box face. */
+        real nearest = mesh.instance >= 0 ? mesh.t : REAL_MAX;
+#if HAS_PORTALS
+        nearest = min(nearest, portal.t);
+#endif
+#if HAS_ABERRATIONS
+        nearest = min(nearest, face.t);
+#endif
+        if (nearest < REAL_MAX) {
+            real limit = nearest + tie_window(ray.o, nearest);
+#if HAS_ABERRATIONS
+            if (face.t <= limit) {
+                kind = EVENT_ABERRATION;
+            }
+#endif
+            if (mesh.instance >= 0 && mesh.t <= limit) {
+                kind = EVENT_MESH;
+            }
+#if HAS_PORTALS
+            if (portal.t <= limit) {
+                kind = EVENT_PORTAL;
+            }
+#endif
+        }
 #endif
         /* 2. Nothing: background. A mesh: shade, stop. */
-        if (ev.kind == EVENT_NONE) {
+        if (kind == EVENT_NONE) {
             break;
         }
-        if (ev.kind == EVENT_MESH) {
-            real travelled = mesh.t * length(ray.r);
+        if (kind == EVENT_MESH) {
+            real len_r = length(ray.r);
             real3 position = ray.o + mesh.t * ray.r;
             px.color = quantize_rgba(shade(SCENE_PASS cam, mesh, ray.r, position));
-            px.depth = TO_FLOAT(ray.L + travelled);
-            px.perceived = TO_FLOAT(ray.Lambda + travelled * perceived_per_world(SCENE_PASS ray));
+            px.depth = TO_FLOAT(ray.L + mesh.t * len_r);
+            px.perceived = TO_FLOAT(ray.Lambda + (mesh.t - ray.t_piece) * len_r * ray.f);
             px.instance = INSTANCE(mesh.instance).meta.z;
             break;
         }
-#if HAS_ABERRATIONS
-        /* STUB (issue 5), 3. An aberration face: move to the hit, recompute the active box just
-         * past it, update r by its model, n += 1. */
-#endif
+        ray.n += 1;
 #if HAS_PORTALS
-        /* STUB (issue 6), 4. A portal: teleport through X, n += 1. */
+        /* 4. A portal: teleport through X, then the active box at the arrival. */
+        if (kind == EVENT_PORTAL) {
+            ray = teleport(SCENE_PASS ray, portal.row, portal.t);
+#if HAS_ABERRATIONS
+            ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
+#endif
+        }
+#endif
+#if HAS_ABERRATIONS
+        /* 3. A box face: the ray stays on the face, leaving it; the active box just past it. */
+        if (kind == EVENT_ABERRATION) {
+            ray = enter_box(SCENE_PASS ray, face.t, sigma_lo, sigma_hi);
+            ray.leaving_kind = EVENT_ABERRATION;
+            ray.leaving = face.row;
+        }
 #endif
     }
     px.events = ray.n;

@@ -26,6 +26,8 @@ typedef double3 real3;
 typedef double4 real4;
 #define REAL_MAX 1.0e300
 #define REAL_TINY 1.0e-300
+/* A real literal written without a suffix: REAL_C(1.0e-9) is the double nearest 1e-9. */
+#define REAL_C(x) x
 #define TO_REAL3(v) convert_double3(v)
 #else
 typedef float real;
@@ -34,6 +36,7 @@ typedef float3 real3;
 typedef float4 real4;
 #define REAL_MAX 3.0e38f
 #define REAL_TINY 1.0e-30f
+#define REAL_C(x) x##f
 #define TO_REAL3(v) convert_float3(v)
 #endif
 
