@@ -23,7 +23,9 @@ def run_make(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
 
 
 @needs_make
-@pytest.mark.parametrize("target", ["test", "demo", "bench", "bench-pytest", "gallery", "lint", "clean", "setup", "help"])
+@pytest.mark.parametrize(
+    "target", ["test", "demo", "bench", "bench-pytest", "gallery", "lint", "clean", "setup", "help"]
+)
 def test_make_targets_parse(target):
     result = run_make("-n", target)
     assert result.returncode == 0, result.stderr
@@ -38,7 +40,7 @@ def test_make_demo_renders_the_starter_scene():
 @needs_make
 def test_make_bench_writes_the_report():
     plan = run_make("-n", "bench").stdout
-    assert "aberrant\" bench --out out/bench" in plan
+    assert 'aberrant" bench --out out/bench' in plan
 
 
 def test_make_bench_pytest_runs_benchmarks_despite_skip_in_addopts():
