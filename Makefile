@@ -1,6 +1,6 @@
 # aberrant — set-up, demo, tests.
 #
-#   make demo    install what is missing, render the starter demo to out/starter.png
+#   make demo    install what is missing, render the aberration tunnels: an image and a short flythrough
 #   make test    install what is missing, run the test suite
 #
 # Set-up (shared by every target that runs code), each step skipped when done:
@@ -37,13 +37,15 @@ INSTALLED := $(VENV)/.stamp-installed
 
 # Extra arguments for pytest, e.g. `make test PYTEST_ARGS="-k portal -x"`.
 PYTEST_ARGS ?=
-DEMO_OUT := out/starter.png
+DEMO := aberration_tunnels
+DEMO_OUT := out/$(DEMO).png
+DEMO_CLIP := out/$(DEMO).gif
 
 .PHONY: help setup apt-packages demo gallery test bench bench-pytest lint format clean
 
 help:
 	@echo "aberrant — make targets:"
-	echo "  make demo    install what is missing, render the starter demo to $(DEMO_OUT)"
+	echo "  make demo    install what is missing, render $(DEMO) to $(DEMO_OUT) and $(DEMO_CLIP)"
 	echo "  make test    install what is missing, run the test suite (pytest -q)"
 	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
 	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
@@ -124,9 +126,12 @@ $(INSTALLED): pyproject.toml $(VENV_OK)
 # every time (it is cheap), the install only when its stamp is stale.
 demo: | apt-packages $(INSTALLED)
 	@mkdir -p "$(dir $(DEMO_OUT))"
-	echo "==> rendering the starter demo"
-	"$(VENV)/bin/aberrant" render starter --backend auto --size 800x600 --out "$(DEMO_OUT)"
+	echo "==> rendering the $(DEMO) demo with the fastest backend here"
+	"$(VENV)/bin/aberrant" render $(DEMO) --backend auto --size 800x600 --out "$(DEMO_OUT)"
+	echo "==> rendering a flythrough (the camera path drives the real systems)"
+	"$(VENV)/bin/aberrant" render $(DEMO) --backend auto --size 320x240 --path --frames 60 --out "$(DEMO_CLIP)"
 	echo "==> image: $(abspath $(DEMO_OUT))"
+	echo "==> flythrough: $(abspath $(DEMO_CLIP))"
 
 # The README's gallery: every demo at 320x240 (the reference backend: the truth, and it traces everything).
 gallery: | apt-packages $(INSTALLED)
