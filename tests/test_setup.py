@@ -32,9 +32,10 @@ def test_make_targets_parse(target):
 
 
 @needs_make
-def test_make_demo_renders_the_starter_scene():
+def test_make_demo_renders_the_tunnels_image_and_flythrough():
     plan = run_make("-n", "demo").stdout
-    assert 'aberrant" render starter --backend auto --size 800x600 --out "out/starter.png"' in plan
+    assert 'render aberration_tunnels --backend auto --size 800x600 --out "out/aberration_tunnels.png"' in plan
+    assert "--path --frames 60 --out \"out/aberration_tunnels.gif\"" in plan
 
 
 @needs_make
