@@ -31,7 +31,6 @@ import os
 import secrets
 import shutil
 import sys
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TextIO
@@ -45,6 +44,7 @@ from engine.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.input import NoInput
 from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
+from engine.progress import Progress
 from engine.scene import Scene
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -99,34 +99,6 @@ def mp4_unavailable() -> str | None:
     except RuntimeError as e:
         return f"imageio-ffmpeg finds no ffmpeg executable ({e})"
     return None
-
-
-class Progress:
-    """A one-line progress bar (``\\r`` updates): frames done, frames per second, time left."""
-
-    def __init__(self, total: int, stream: TextIO | None, label: str = "flythrough") -> None:
-        self.total, self.stream, self.label = total, stream, label
-        self.start = time.perf_counter()
-
-    def update(self, done: int) -> None:
-        if self.stream is None:
-            return
-        elapsed = max(time.perf_counter() - self.start, 1e-9)
-        fps = done / elapsed
-        left = (self.total - done) / fps if fps > 0 else math.inf
-        width = 24
-        filled = int(width * done / max(self.total, 1))
-        eta = "--:--" if not math.isfinite(left) else f"{int(left) // 60:02d}:{int(left) % 60:02d}"
-        self.stream.write(
-            f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {done}/{self.total} frames"
-            f"  {fps:5.2f} fps  {eta} left"
-        )
-        self.stream.flush()
-
-    def finish(self) -> None:
-        if self.stream is not None:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _even(rgb: np.ndarray) -> np.ndarray:
@@ -231,7 +203,7 @@ def render_flythrough(
     walker = path.inputs(scene)
     sink = _Sink(out_path, kind, fps)
     stream = sys.stderr if progress is True else (progress or None)
-    bar = Progress(frames, stream)  # type: ignore[arg-type]
+    bar = None if stream is None else Progress(frames, stream, interval_s=2.0, label="flythrough", unit="frames")
     try:
         with App(scene, backend, size=size, aovs=("color",), input_source=NoInput()) as app:
             for index in range(frames):
@@ -242,13 +214,15 @@ def render_flythrough(
                 if on_frame is not None:
                     on_frame(index, app)
                 sink.add(np.ascontiguousarray(frame.aov("color")[..., :3]))
-                bar.update(index + 1)
+                if bar is not None:
+                    bar.step()
         sink.commit()
     except BaseException:
         sink.discard()
         raise
     finally:
-        bar.finish()
+        if bar is not None:
+            bar.finish()
     return frames
 
 

@@ -20,13 +20,13 @@ from PIL import Image
 
 from engine.bench import embree, metrics, plot, reference
 from engine.bench.metrics import Timing, compare, geometric_mean, instance_mismatch, pareto_front, relative_error
-from engine.bench.progress import Progress, clock
 from engine.bench.runner import make_config, run_bench, write_outputs
 from engine.bench.scenes import QUICK_SCENES, bench_scenes, ten_boxes
 from engine.bench.sweeps import check_sweeps, settings_for
 from engine.cli import main
 from engine.errors import AberrantError
 from engine.packing import scene_camera
+from engine.progress import Progress, clock
 from engine.settings import Settings
 
 # --- metrics ------------------------------------------------------------------------------------------------

@@ -25,13 +25,13 @@ from engine.bench.facts import machine_info, scene_info
 from engine.bench.metrics import compare
 from engine.bench.overhead import measure_overhead
 from engine.bench.plot import plot_png
-from engine.bench.progress import Progress, clock
 from engine.bench.reference import ReferenceCache
 from engine.bench.report import render_report
 from engine.bench.scenes import SceneSpec, resolve_scenes
 from engine.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
 from engine.errors import AberrantError, BackendUnavailable
 from engine.packing import scene_camera
+from engine.progress import Progress, clock
 from engine.scene import Scene
 from engine.scene_file import write_atomically
 

@@ -1,4 +1,4 @@
-"""A progress bar on stderr: done/total, elapsed, ETA and what runs now.
+"""A progress bar on stderr: done/total, rate, elapsed, ETA and what runs now (bench, flythroughs).
 
 On a terminal it redraws one line; elsewhere (CI logs, captured test output)
 it prints a line at most every few seconds, so a long run still shows that
@@ -25,7 +25,15 @@ def clock(seconds: float) -> str:
 class Progress:
     """``step(label)`` after each unit of work; ``note(text)`` for a line of its own."""
 
-    def __init__(self, total: int, stream: TextIO | None = None, interval_s: float = 5.0) -> None:
+    def __init__(
+        self,
+        total: int,
+        stream: TextIO | None = None,
+        interval_s: float = 5.0,
+        label: str = "bench",
+        unit: str = "",
+    ) -> None:
+        self.label, self.unit = label, unit
         self.total = max(1, total)
         self.done = 0
         self.stream = stream if stream is not None else sys.stderr
@@ -41,7 +49,9 @@ class Progress:
         eta = elapsed / self.done * (self.total - self.done) if self.done else float("nan")
         eta_text = clock(eta) if self.done else "?"
         bar = "#" * filled + "." * (BAR - filled)
-        return f"bench [{bar}] {self.done}/{self.total} {clock(elapsed)} elapsed, ETA {eta_text}  {label}".rstrip()
+        rate = f" {self.done / elapsed:.2f} {self.unit}/s," if self.unit and elapsed > 0 else ""
+        counts = f"{self.done}/{self.total}{' ' + self.unit if self.unit else ''}"
+        return f"{self.label} [{bar}] {counts}{rate} {clock(elapsed)} elapsed, ETA {eta_text}  {label}".rstrip()
 
     def step(self, label: str = "", count: int = 1) -> None:
         self.done = min(self.total, self.done + count)
