@@ -18,9 +18,10 @@ from typing import ClassVar
 
 import numpy as np
 
+from engine.camera_view import CameraView
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packing import CameraView, PackedScene, TableUpdate
+from engine.packing import PackedScene, TableUpdate
 
 #: Outputs a backend can write (DESIGN.md section 5).
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")

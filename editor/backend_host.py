@@ -17,7 +17,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backends.base import BACKENDS, Backend, Frame, backend_class, create_backend, probe
-from engine.packing import CameraView, ScenePacker
+from engine.camera_view import CameraView
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 if TYPE_CHECKING:

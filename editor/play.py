@@ -18,9 +18,9 @@ from pathlib import Path
 
 from backends.base import Backend, Frame
 from engine.app import App
+from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
-from engine.packing import CameraView, scene_camera
 from engine.scene import Scene
 from engine.scene_file import load_scene, scene_to_json
 

@@ -21,9 +21,9 @@ import numpy as np
 
 from components import Aberration, Camera, Mesh, Portal, Transform
 from editor.view import perspective, view_matrix
+from engine.camera_view import CameraView
 from engine.errors import AberrantError
 from engine.maths import trs_matrix
-from engine.packing import CameraView
 from engine.scene import Scene
 
 if TYPE_CHECKING:

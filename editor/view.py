@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from components import Transform
+from engine.camera_view import CameraView
 from engine.maths import quat_from_matrix, quat_to_matrix
-from engine.packing import CameraView
 
 #: Near and far planes of the preview rasteriser (the tracer has none).
 NEAR = 0.05

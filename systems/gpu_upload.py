@@ -10,7 +10,8 @@ from __future__ import annotations
 import esper
 
 from backends.base import Backend
-from engine.packing import PackedScene, ScenePacker, scene_camera
+from engine.camera_view import scene_camera
+from engine.packing import PackedScene, ScenePacker
 from engine.scene import Scene
 from systems.state import UploadStats
 

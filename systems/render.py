@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import esper
 
 from backends.base import AOVS, Backend
-from engine.packing import scene_camera
+from engine.camera_view import scene_camera
 from engine.scene import Scene
 from systems.state import FrameSlot
 

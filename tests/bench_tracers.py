@@ -16,7 +16,8 @@ import numpy as np
 import pytest
 
 from engine.bench.scenes import mesh_10k, mesh_200k, ten_boxes, ten_boxes_aberration, ten_boxes_portals
-from engine.packing import ScenePacker, scene_camera
+from engine.camera_view import scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: (backend, precision) pairs benchmarked. The OpenCL backend slots in here.

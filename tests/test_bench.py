@@ -23,9 +23,9 @@ from engine.bench.metrics import Timing, compare, geometric_mean, instance_misma
 from engine.bench.runner import make_config, run_bench, write_outputs
 from engine.bench.scenes import QUICK_SCENES, bench_scenes, ten_boxes
 from engine.bench.sweeps import check_sweeps, settings_for
+from engine.camera_view import scene_camera
 from engine.cli import main
 from engine.errors import AberrantError
-from engine.packing import scene_camera
 from engine.progress import Progress, clock
 from engine.settings import Settings
 

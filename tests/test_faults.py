@@ -38,9 +38,9 @@ from backends.base import BACKENDS, Frame, backend_class, create_backend, probe
 from backends.reference.backend import ReferenceBackend
 from demos import build_demo
 from editor.backend_host import BackendHost
+from engine.camera_view import CameraView, scene_camera
 from engine.cli import main
 from engine.errors import AberrantError
-from engine.packing import CameraView, scene_camera
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene, save_scene
 

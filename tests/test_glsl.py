@@ -16,8 +16,9 @@ from backends.glsl.backend import CAMERA_IMAGE, GlslBackend, _write_texels
 from backends.shared import bvh_depth, stack_size
 from components import Transform
 from engine import layout
+from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
-from engine.packing import CameraView, ScenePacker, scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 PRECISIONS = ["f32", "f64"]

@@ -25,8 +25,9 @@ from backends.opencl import backend as ocl
 from backends.opencl.backend import OpenClBackend
 from components import Transform
 from engine import layout
+from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from engine.packing import CameraView, ScenePacker, TableUpdate, scene_camera
+from engine.packing import ScenePacker, TableUpdate
 from engine.scene import Scene
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from components import Aberration, Mesh, Portal, Transform
+from engine.camera_view import CameraView, pack_camera
 from engine.maths import quat_from_euler_deg, trs_matrix
-from engine.packing import CameraView, ScenePacker, TableUpdate, pack_camera
+from engine.packing import ScenePacker, TableUpdate
 from engine.scene import Scene
 from engine.settings import Settings
 

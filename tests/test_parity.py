@@ -23,7 +23,8 @@ from backends.reference.backend import ReferenceBackend
 from components import Transform
 from demos import starter
 from engine.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
-from engine.packing import ScenePacker, scene_camera
+from engine.camera_view import scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: (backend, precision) pairs measured against the reference. The OpenCL backend slots in here.

@@ -17,8 +17,9 @@ from backends.reference.intersect import intersect_triangles, shear_rays
 from backends.reference.trace import to_uint8
 from backends.reference.traverse import Geometry, nearest_mesh_hits
 from components import Transform
+from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
-from engine.packing import CameraView, ScenePacker, scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 

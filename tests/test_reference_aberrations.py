@@ -16,9 +16,10 @@ from backends.reference.backend import ReferenceBackend
 from backends.reference.trace import TraceResult
 from components import Aberration, Transform
 from engine.app import App
+from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix, trs_inverse
-from engine.packing import ScenePacker, scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 from systems.camera_movement import speed_boxes, walk

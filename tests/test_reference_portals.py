@@ -16,7 +16,8 @@ import pytest
 from backends.base import AOVS
 from backends.reference.backend import ReferenceBackend
 from backends.reference.trace import TraceResult, to_uint8
-from engine.packing import ScenePacker, scene_camera
+from engine.camera_view import scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 

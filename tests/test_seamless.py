@@ -21,9 +21,9 @@ import itertools
 import numpy as np
 
 from engine.app import App
+from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
-from engine.packing import scene_camera
 from engine.scene import Scene
 from engine.settings import Settings
 

@@ -12,7 +12,8 @@ import trimesh
 from backends.reference.backend import ReferenceBackend
 from backends.reference.intersect import exact_sign_of_difference, intersect_triangles, shear_rays
 from backends.reference.traverse import nearest_mesh_hits
-from engine.packing import ScenePacker, scene_camera
+from engine.camera_view import scene_camera
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 

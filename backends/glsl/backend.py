@@ -26,9 +26,10 @@ import numpy as np
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from engine import layout
+from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packing import CameraView, Features, PackedScene, TableUpdate, pack_camera
+from engine.packing import Features, PackedScene, TableUpdate
 
 if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
     import moderngl

@@ -14,9 +14,10 @@ from backends.reference.portals import Portals
 from backends.reference.shading import ShadingSettings, to_uint8
 from backends.reference.trace import Space, TraceResult, trace
 from backends.reference.traverse import Geometry
+from engine.camera_view import CameraView
 from engine.errors import AberrantError
 from engine.layout import Precision
-from engine.packing import CameraView, Features, PackedScene, TableUpdate
+from engine.packing import Features, PackedScene, TableUpdate
 
 #: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
 _MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes")

@@ -23,8 +23,9 @@ from engine.bench.metrics import Timing, compare
 from engine.bench.reference import ReferenceCache
 from engine.bench.sweeps import Setting
 from engine.bvh import BvhParams, build_bvh
+from engine.camera_view import CameraView, scene_camera
 from engine.errors import BackendUnavailable
-from engine.packing import CameraView, PackedScene, ScenePacker, TableUpdate, scene_camera
+from engine.packing import PackedScene, ScenePacker, TableUpdate
 from engine.scene import Scene
 
 #: What the timed frames read back: the colour image, as the app and the CLI do.

@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 
 from components import Mesh, Transform
+from engine.camera_view import CameraView
 from engine.maths import quat_to_matrix
-from engine.packing import CameraView
 from engine.scene import Scene
 
 NOT_INSTALLED = "embree: not installed (pip install '.[bench]')"

@@ -21,8 +21,9 @@ import numpy as np
 from backends.base import AOVS, Backend, Frame, backend_class
 from components import Transform
 from engine.app import App
+from engine.camera_view import CameraView
 from engine.input import NoInput
-from engine.packing import CameraView, PackedScene, TableUpdate
+from engine.packing import PackedScene, TableUpdate
 from engine.scene import Scene
 
 ENTITIES = 1000

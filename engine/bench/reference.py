@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from backends.base import AOVS
-from engine.packing import CameraView, ScenePacker
+from engine.camera_view import CameraView
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.scene_file import dumps, scene_document
 

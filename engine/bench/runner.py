@@ -29,8 +29,8 @@ from engine.bench.reference import ReferenceCache
 from engine.bench.report import render_report
 from engine.bench.scenes import SceneSpec, resolve_scenes
 from engine.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from engine.packing import scene_camera
 from engine.progress import Progress, clock
 from engine.scene import Scene
 from engine.scene_file import write_atomically
