@@ -55,6 +55,8 @@
 #define VIDX3(v, i) ((v)[i])
 /* No fused multiply-add in the expressions feeding this variable (watertight edge functions). */
 #define PRECISE precise
+/* OpenCL C: always_inline; GLSL compilers inline every call already. */
+#define FORCE_INLINE
 #define F_INF uintBitsToFloat(0x7F800000u)
 
 /* A struct usable by its bare name (OpenCL needs a typedef for that). */

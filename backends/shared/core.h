@@ -15,7 +15,8 @@
  *   casts       TO_REAL TO_REAL3 (from float3) TO_FLOAT TO_FLOAT3 TO_INT TO_DOUBLE,
  *               AS_INT / AS_FLOAT (bit reinterpretation)
  *   helpers     ABS (float abs, scalar or vector), VIDX3(v, i) (component i of
- *               a real3), PRECISE (no fused multiply-add), STRUCT_BEGIN/END
+ *               a real3), PRECISE (no fused multiply-add), FORCE_INLINE (before a
+ *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
  *               BVH_NODE(i), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i)
@@ -226,7 +227,7 @@ float4 quantize_rgba(float3 c)
 /* --- watertight ray-triangle test -------------------------------------------------- */
 
 /* Permute so the largest |d| component is z; swap x/y when it is negative (keeps the winding). */
-ShearedRay shear_ray(real3 o, real3 d)
+FORCE_INLINE ShearedRay shear_ray(real3 o, real3 d)
 {
     ShearedRay sr;
     int kz = dominant_axis(d);
@@ -253,7 +254,7 @@ ShearedRay shear_ray(real3 o, real3 d)
  * sheared on its own and a shared edge's function is the same two products in swapped
  * order, so a ray through a shared edge or vertex never falls through. Edge-on and
  * degenerate triangles never hit; no NaN leaves. */
-real4 intersect_triangle(ShearedRay sr, real3 v0, real3 v1, real3 v2, bool cull)
+FORCE_INLINE real4 intersect_triangle(ShearedRay sr, real3 v0, real3 v1, real3 v2, bool cull)
 {
     real4 miss = R4(REAL_MAX, 0.0f, 0.0f, 0.0f);
     real3 a = v0 - sr.o;
@@ -304,7 +305,7 @@ real4 intersect_triangle(ShearedRay sr, real3 v0, real3 v1, real3 v2, bool cull)
 }
 
 /* Test triangle k of instance row; keep the hit smallest in (t, instance, triangle). */
-MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k, int row, bool cull, real t_min)
+FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k, int row, bool cull, real t_min)
 {
     Triangle tri = TRIANGLE(k);
     real4 h = intersect_triangle(sr, TO_REAL3(tri.v0.xyz), TO_REAL3(tri.v1.xyz), TO_REAL3(tri.v2.xyz), cull);
@@ -322,7 +323,7 @@ MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k, int row, bo
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
  * asset's BVH from its root, nearest child first, with a small stack. */
-MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min)
+FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min)
 {
     Instance inst = INSTANCE(row);
     real3 oo = R3(dot(inst.w2o0.xyz, o) + inst.w2o0.w, dot(inst.w2o1.xyz, o) + inst.w2o1.w,
@@ -416,7 +417,7 @@ MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real 
 }
 
 /* The nearest triangle hit with t_min < t <= t_max over every instance, culled by world bounds. */
-MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
+FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
 {
     MeshHit best;
     best.t = t_max;
@@ -457,7 +458,7 @@ bool checker_odd_fp64(double a, double b, double c)
 /* base * checker * (ambient + (1 - ambient) * max(0, n.l)), n the geometric normal
  * (object normal through the transpose of world_to_object's 3x3) turned to face the ray.
  * position is camera-relative; cam.origin turns it into world space for triplanar cells. */
-float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 position)
+FORCE_INLINE float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 position)
 {
     Instance inst = INSTANCE(hit.instance);
     Triangle tri = TRIANGLE(hit.triangle);
@@ -575,7 +576,7 @@ BoxSpan box_axis(BoxSpan span, real a, real v, int k)
 /* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
  * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
  * lower row, then the entry face. */
-Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
     Event best;
     best.t = REAL_MAX;
@@ -720,7 +721,7 @@ STRUCT_END(Turn)
  * bounds: 1. leaving a bending box, its exit rule sets w (restore: d0, repeat: its entry rule
  * again, invert: with -D); 2. entering a bending box, its entry rule bends w; 3. r follows from w
  * by the new box (metric) or is w. */
-Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, real3 d0, real3 lo, real3 hi)
+FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, real3 d0, real3 lo, real3 hi)
 {
 #if HAS_BENDING
     if (old != next) {
@@ -762,7 +763,7 @@ Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, real3 d0, real3 
  * kind EVENT_PORTAL, t = REAL_MAX for none. The closed quad |x|, |y| <= 1 at z = 0, two-sided; a ray
  * parallel to its plane never hits; the portal being left (skip) and unlinked ones never count; ties
  * go to the lower row. */
-Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
     Event best;
     best.t = REAL_MAX;
@@ -792,7 +793,7 @@ Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 /* Through portal row at t along the leg (portals.teleport): the segment's length is added, then the
  * hit point goes through X and r, w, d0 through its linear part (renormalised, kept if degenerate);
  * a new leg starts on the target quad, which the ray is then leaving. The active box is the caller's. */
-Ray teleport(SCENE_DECL Ray ray, int row, real t)
+FORCE_INLINE Ray teleport(SCENE_DECL Ray ray, int row, real t)
 {
     real len_r = length(ray.r);
     ray.L = ray.L + t * len_r;
@@ -814,7 +815,7 @@ Ray teleport(SCENE_DECL Ray ray, int row, real t)
 
 /* The primary ray through pixel (i, j), row 0 = top (DESIGN.md section 3): the camera-space
  * vector normalised, then rotated (never a difference of two world points). */
-Ray primary_ray(Camera cam, int i, int j)
+FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
 {
     real tan_half = cam.lens.x;
     real aspect = cam.lens.y;
@@ -843,7 +844,7 @@ Ray primary_ray(Camera cam, int i, int j)
 /* After an event that left the ray at t along its leg (a box face) or at a new leg's start (a portal,
  * t = 0): the active box just past that point, the transition into it (rule 7), and a new leg where
  * the direction changed. Lambda is closed off where the perceived rate changes. */
-Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
+FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
 {
     int next = box_after(SCENE_PASS ray.o, ray.r, t);
     Turn turn = transition(SCENE_PASS ray.aberration, next, ray.w, ray.r, ray.d0, lo, hi);
