@@ -64,8 +64,11 @@ inline real vidx3_(real3 v, int i) { return i == 0 ? v.x : (i == 1 ? v.y : v.z);
 #define PRECISE
 /* Inline this function (the core's large ones, called in loops): PoCL otherwise keeps some calls, and
  * the structs they take and return (Ray: 100 bytes) go through the stack, with store-forwarding
- * stalls. Measured on PoCL 3.1: -25 % frame time with aberrations, -10 % on plain scenes. */
+ * stalls. Measured on PoCL 3.1: -25 % frame time with aberrations, -10 % on plain scenes. A benchmark
+ * may define it empty (extra_defines) to compare. */
+#ifndef FORCE_INLINE
 #define FORCE_INLINE __attribute__((always_inline))
+#endif
 #define F_INF INFINITY
 
 /* A struct usable by its bare name, as in GLSL. */
