@@ -354,7 +354,7 @@ class GlslBackend(Backend):
             try:
                 program = self._context().compute_shader(source)
             except Exception as e:  # moderngl.Error carries the driver's compile log
-                raise AberrantError(f"glsl backend: the compute shader does not compile: {e}") from e
+                raise BackendUnavailable(f"glsl backend: the compute shader does not compile: {e}") from e
             self._programs[key] = program
             self.compile_count += 1
         return program

@@ -373,7 +373,7 @@ class OpenClBackend(Backend):
             try:
                 program = program.build(options=list(BUILD_OPTIONS), cache_dir=self._cache_dir)
             except cl.Error as e:  # its message carries the build log
-                raise AberrantError(f"opencl backend: the kernel does not build: {e}") from e
+                raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
             kernel = cl.Kernel(program, "trace")
             self._kernels[key] = kernel
             self.compile_count += 1
