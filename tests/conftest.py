@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from backends.base import backend_class, probe, required_backends
+from engine.scene import Scene
 
 os.environ.setdefault("ABERRANT_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "aberrant"))
 
@@ -23,6 +25,15 @@ def require_backend(name: str) -> None:
 
 
 _live: dict[tuple[str, str], object] = {}
+
+
+@pytest.fixture
+def scenes() -> Iterator[list[Scene]]:
+    """Scenes a test makes; their esper worlds are closed afterwards."""
+    made: list[Scene] = []
+    yield made
+    for scene in made:
+        scene.close()
 
 
 @pytest.fixture(scope="session")

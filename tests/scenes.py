@@ -21,7 +21,7 @@ from backends.base import Backend, Frame
 from backends.reference.backend import ReferenceBackend
 from components import Aberration, Mesh, Transform
 from engine.maths import trs_inverse
-from engine.packing import scene_camera
+from engine.packing import ScenePacker, scene_camera
 from engine.scene import Scene
 
 #: Every fast backend and precision, measured against the reference.
@@ -218,3 +218,13 @@ def singular_pixels(scene: Scene, width: int, height: int, boxes: list[Transform
         grazes = np.any((np.abs(v) <= tol) & (np.abs(np.abs(a) - 0.5) <= tol), axis=1)
         out |= meets & (touches | edge_in | edge_out | grazes)
     return out.reshape(height, width)
+
+
+def upload_to_reference(scene: Scene) -> ReferenceBackend:
+    """A reference backend holding ``scene`` (packed as the reference wants it)."""
+    backend = ReferenceBackend()
+    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    updates = packer.sync(scene)
+    assert packer.packed is not None
+    backend.upload(packer.packed, updates)
+    return backend

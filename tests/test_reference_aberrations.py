@@ -6,10 +6,9 @@ Expected values are computed here by hand (independently of the tracer's code).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
+from scenes import upload_to_reference as upload
 
 from backends.reference.aberrations import SigmaBounds, sigma
 from backends.reference.backend import ReferenceBackend
@@ -19,30 +18,12 @@ from engine.app import App
 from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix, trs_inverse
-from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 from systems.camera_movement import speed_boxes, walk
 
 #: The wall's front face lies in the plane z = WALL_Z.
 WALL_Z = -5.5
-
-
-@pytest.fixture
-def scenes() -> Iterator[list[Scene]]:
-    made: list[Scene] = []
-    yield made
-    for scene in made:
-        scene.close()
-
-
-def upload(scene: Scene) -> ReferenceBackend:
-    backend = ReferenceBackend()
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return backend
 
 
 def one_ray(backend: ReferenceBackend, origin, direction, sigma_bounds=None) -> TraceResult:

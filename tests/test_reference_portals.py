@@ -8,16 +8,14 @@ through a portal.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
+from scenes import upload_to_reference as upload
 
 from backends.base import AOVS
 from backends.reference.backend import ReferenceBackend
 from backends.reference.trace import TraceResult, to_uint8
 from engine.camera_view import scene_camera
-from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 
@@ -25,23 +23,6 @@ B = np.array([100.0, 0.0, 0.0])
 #: A room's back wall: (entity name, centre, front face z).
 A_WALL_Z, B_WALL_Z = -4.0, -8.0
 CAMERA = (0.0, 0.0, 5.0)
-
-
-@pytest.fixture
-def scenes() -> Iterator[list[Scene]]:
-    made: list[Scene] = []
-    yield made
-    for scene in made:
-        scene.close()
-
-
-def upload(scene: Scene) -> ReferenceBackend:
-    backend = ReferenceBackend()
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return backend
 
 
 def unit(v) -> np.ndarray:
