@@ -164,7 +164,7 @@ def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> 
 def cmd_render(args: argparse.Namespace) -> int:
     from backends.base import AOVS
     from engine.app import render_once
-    from engine.scene_file import write_atomically
+    from engine.atomic_files import write_atomically
 
     if args.path:
         return cmd_render_path(args)

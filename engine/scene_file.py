@@ -6,10 +6,11 @@ and turns each failure into a one-line :class:`SceneFileError` that names the
 file, the entity and the field. Mesh files are read at load time, so a
 missing or empty mesh fails here rather than in the middle of a render.
 
-Saving writes canonical JSON (fixed key order, every field spelt out, floats
-by ``repr`` so they round-trip exactly, rotations as quaternions) to a
-temporary file beside the target, fsyncs it and renames it over the target:
-a crash leaves either the old file or the new one, never half of one.
+Saving writes canonical JSON (:mod:`engine.scene_writer`: fixed key order,
+every field spelt out, floats by ``repr`` so they round-trip exactly,
+rotations as quaternions) through :mod:`engine.atomic_files`: a temporary
+file beside the target, fsynced and renamed over it, so a crash leaves either
+the old file or the new one, never half of one.
 
 Format, version 1::
 
@@ -25,14 +26,9 @@ Format, version 1::
 
 from __future__ import annotations
 
-import contextlib
 import json
-import math
 import os
-import re
-import secrets
-import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -41,13 +37,24 @@ import numpy as np
 from components import Aberration, Camera, Mesh, Portal, Transform, ValidationError
 from components.validation import vec3
 from engine.assets import PRIMITIVES
+from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.scene import AssetSpec, Scene
+from engine.scene_writer import FORMAT, VERSION, dumps, scene_document, scene_to_json
 from engine.settings import Settings
 
-FORMAT = "aberrant-scene"
-VERSION = 1
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "SceneFileError",
+    "dumps",
+    "load_scene",
+    "save_scene",
+    "scene_document",
+    "scene_to_json",
+]
+
 
 TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities")
 SETTINGS_KEYS = ("background", "light_dir", "max_events", "event_limit_color", "ambient")
@@ -412,234 +419,6 @@ def _unencodable_string(doc: object) -> str | None:
         elif isinstance(value, list):
             stack.extend((f"{where}[{i}]", item) for i, item in enumerate(value))
     return None
-
-
-# --- writing -----------------------------------------------------------------
-
-
-def _floats(values: tuple[float, ...]) -> list[float]:
-    return [float(v) for v in values]
-
-
-def _asset_path(scene: Scene, spec: AssetSpec, target_dir: Path) -> str:
-    """Where the asset is, as the saved file should say: relative when inside its folder, else absolute."""
-    location = Path(os.path.abspath(scene.asset_path(spec)))
-    try:
-        return location.relative_to(target_dir).as_posix()
-    except ValueError:
-        return str(location)
-
-
-def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, Any]:
-    """The JSON document of a scene (asset paths relative to ``target_dir`` where they can be)."""
-    target_dir = Path(os.path.abspath(target_dir if target_dir is not None else Path.cwd()))
-    s = scene.settings
-    doc: dict[str, Any] = {
-        "format": FORMAT,
-        "version": VERSION,
-        "name": scene.name,
-        "settings": {
-            "background": _floats(s.background),
-            "light_dir": _floats(s.light_dir),
-            "max_events": s.max_events,
-            "event_limit_color": _floats(s.event_limit_color),
-            "ambient": float(s.ambient),
-        },
-    }
-    camera_entity = scene.camera_entity
-    if camera_entity is not None:
-        transform = scene.get(camera_entity, Transform)
-        camera = scene.get(camera_entity, Camera)
-        doc["camera"] = {
-            "name": scene.name_of(camera_entity),
-            "position": _floats(transform.position),
-            "rotation": _floats(transform.rotation),
-            "fov_deg": float(camera.fov_deg),
-            "speed": float(camera.speed),
-        }
-    assets: dict[str, Any] = {}
-    for name in sorted(scene.assets):
-        spec = scene.assets[name]
-        assets[name] = (
-            {"primitive": spec.primitive}
-            if spec.primitive is not None
-            else {"path": _asset_path(scene, spec, target_dir)}
-        )
-    doc["assets"] = assets
-    entities = []
-    for entity in scene.entities():
-        if entity == camera_entity:
-            continue
-        name = scene.name_of(entity)
-        if scene.has(entity, Camera):
-            raise SceneError(
-                "only the active camera can be saved; this entity also has a Camera", entity=name, field="camera"
-            )
-        transform = scene.try_get(entity, Transform) or Transform()
-        item: dict[str, Any] = {
-            "name": name,
-            "transform": {
-                "position": _floats(transform.position),
-                "rotation": _floats(transform.rotation),
-                "scale": _floats(transform.scale),
-            },
-        }
-        mesh = scene.try_get(entity, Mesh)
-        if mesh is not None:
-            item["mesh"] = {
-                "asset": mesh.asset,
-                "color": _floats(mesh.color),
-                "checker": float(mesh.checker),
-                "cull_backfaces": mesh.cull_backfaces,
-            }
-        aberration = scene.try_get(entity, Aberration)
-        if aberration is not None:
-            item["aberration"] = {
-                "deformation": _floats(aberration.deformation),
-                "mode": aberration.mode,
-                "exit": aberration.exit,
-                "priority": aberration.priority,
-                "debug_draw": aberration.debug_draw,
-                "color": _floats(aberration.color),
-            }
-        portal = scene.try_get(entity, Portal)
-        if portal is not None:
-            item["portal"] = {"target": portal.target, "color": _floats(portal.color), "debug_draw": portal.debug_draw}
-        entities.append(item)
-    doc["entities"] = entities
-    return doc
-
-
-def _scalar(value: object) -> str:
-    if isinstance(value, float):
-        if not math.isfinite(value):  # components never hold these; refuse rather than write invalid JSON
-            raise ValueError(f"cannot save the non-finite number {value!r}")
-        return repr(value)
-    return json.dumps(value, ensure_ascii=False)
-
-
-def dumps(value: object, indent: int = 0) -> str:
-    """Canonical JSON: objects one key a line (2-space indent), arrays of scalars on one line."""
-    pad = "  " * (indent + 1)
-    if isinstance(value, dict):
-        if not value:
-            return "{}"
-        items = [f"{pad}{json.dumps(str(k), ensure_ascii=False)}: {dumps(v, indent + 1)}" for k, v in value.items()]
-        return "{\n" + ",\n".join(items) + "\n" + "  " * indent + "}"
-    if isinstance(value, list | tuple):
-        if not value:
-            return "[]"
-        if all(not isinstance(v, dict | list | tuple) for v in value):
-            return "[" + ", ".join(_scalar(v) for v in value) + "]"
-        return "[\n" + ",\n".join(pad + dumps(v, indent + 1) for v in value) + "\n" + "  " * indent + "]"
-    return _scalar(value)
-
-
-def scene_to_json(scene: Scene, target_dir: Path | None = None) -> str:
-    """The exact text :func:`save_scene` writes."""
-    return dumps(scene_document(scene, target_dir)) + "\n"
-
-
-#: A temporary older than this is stale even if a process with its PID exists (the PID was reused).
-STALE_TEMP_SECONDS = 3600.0
-_TEMP_SUFFIX = re.compile(r"(\d+)-[0-9a-f]{8}\.tmp")
-
-
-def temp_path(path: Path) -> Path:
-    """The temporary sibling a save of ``path`` writes first: ``.NAME.PID-RANDOM.tmp`` (hidden, owner named)."""
-    return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.tmp")
-
-
-def _process_alive(pid: int) -> bool:
-    """Whether a process ``pid`` exists on this machine (assume so where that cannot be asked safely)."""
-    if pid == os.getpid():
-        return True
-    if os.name != "posix":  # os.kill(pid, 0) would terminate the process on Windows
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # EPERM: it exists, owned by someone else
-        return True
-    return True
-
-
-def clean_stale_temps(path: Path) -> list[Path]:
-    """Remove the temporaries of ``path`` that a killed save left behind; returns what was removed.
-
-    A temporary is stale when the process named in it is gone (or it is
-    older than :data:`STALE_TEMP_SECONDS`); a save in progress in another
-    live process keeps its file.
-    """
-    prefix = f".{path.name}."
-    removed: list[Path] = []
-    try:
-        entries = list(os.scandir(path.parent if str(path.parent) else "."))
-    except OSError:
-        return removed
-    now = time.time()
-    for entry in entries:
-        if not entry.name.startswith(prefix):
-            continue
-        match = _TEMP_SUFFIX.fullmatch(entry.name[len(prefix) :])
-        if match is None:
-            continue
-        try:
-            old = now - entry.stat(follow_symlinks=False).st_mtime > STALE_TEMP_SECONDS
-            if old or not _process_alive(int(match.group(1))):
-                os.unlink(entry.path)
-                removed.append(Path(entry.path))
-        except OSError:  # gone meanwhile, or not ours to remove: leave it
-            continue
-    return removed
-
-
-def write_atomically(outputs: Mapping[str | os.PathLike[str], bytes]) -> None:
-    """Write each file via a temporary sibling, fsync, then rename over the target.
-
-    All temporaries are written before any rename, so an error while writing
-    leaves every target untouched and no temporary behind. A process killed
-    mid-save leaves the old file and at most a hidden ``.NAME.PID-RANDOM.tmp``,
-    which the next save of that file removes (:func:`clean_stale_temps`).
-    """
-    staged: list[tuple[str, Path]] = []
-    try:
-        for target, data in outputs.items():
-            path = Path(target)
-            clean_stale_temps(path)
-            tmp = temp_path(path)
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # umask applies, like a normal file
-            staged.append((str(tmp), path))
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            with contextlib.suppress(FileNotFoundError):  # keep an existing file's permissions
-                os.chmod(tmp, os.stat(path).st_mode & 0o7777)
-        while staged:
-            tmp_name, path = staged[0]
-            os.replace(tmp_name, path)
-            staged.pop(0)
-            _fsync_dir(path.parent)
-    finally:
-        for tmp_name, _ in staged:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp_name)
-
-
-def _fsync_dir(directory: Path) -> None:
-    """Make a rename durable (POSIX); a no-op where directories cannot be opened."""
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:

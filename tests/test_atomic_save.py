@@ -23,8 +23,9 @@ from pathlib import Path
 
 import pytest
 
+from engine.atomic_files import STALE_TEMP_SECONDS, clean_stale_temps
 from engine.scene import Scene
-from engine.scene_file import STALE_TEMP_SECONDS, clean_stale_temps, load_scene, save_scene, scene_to_json
+from engine.scene_file import load_scene, save_scene, scene_to_json
 
 ROOT = Path(__file__).resolve().parents[1]
 KILLS = 20

@@ -473,8 +473,10 @@ def test_saving_into_a_folder_that_is_a_file(saved):
 
 def test_write_atomically_is_what_the_tello_importer_and_cli_share():
     """Every writer in the engine goes through the one atomic writer (so these faults cover them all)."""
+    import engine.atomic_files
     import engine.cli
+    import engine.scene_file
     import engine.tello
 
-    assert engine.tello.write_atomically is engine.scene_file.write_atomically
+    assert engine.tello.write_atomically is engine.scene_file.write_atomically is engine.atomic_files.write_atomically
     assert "write_atomically" in Path(engine.cli.__file__).read_text()

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from backends.base import BACKENDS, backend_class
+from engine.atomic_files import write_atomically
 from engine.bench import embree
 from engine.bench.cells import CellRunner
 from engine.bench.facts import machine_info, scene_info
@@ -33,7 +34,6 @@ from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.progress import Progress, clock
 from engine.scene import Scene
-from engine.scene_file import write_atomically
 
 FORMAT = "aberrant-bench"
 VERSION = 1
