@@ -84,6 +84,40 @@ BVH_NODE_DTYPE = np.dtype(
     }
 )
 
+#: A 4-wide BVH node (``ScenePacker(bvh_width=4)``), 128 bytes: the boxes of its
+#: four children stored SoA, one ``float4`` per bound component (lane i = child
+#: i), so a visit is a few 4-vector min/max operations. ``child[i]`` and
+#: ``count[i]`` say what child i is: ``count > 0``, a leaf over triangles
+#: ``[child, child + count)``; ``count == 0``, the wide node ``child``;
+#: ``count < 0``, an empty slot (its box is a point at the origin: the count,
+#: not the box, rules it out). Children keep the binary tree's left-to-right
+#: order. Bounds are rounded outward; indices are absolute in the packed scene.
+BVH4_NODE_DTYPE = _build(
+    [
+        ("lo_x", "float4", 1),
+        ("lo_y", "float4", 1),
+        ("lo_z", "float4", 1),
+        ("hi_x", "float4", 1),
+        ("hi_y", "float4", 1),
+        ("hi_z", "float4", 1),
+        ("child", "int4", 1),
+        ("count", "int4", 1),
+    ],
+    "f32",
+)
+
+#: The ``bvh_nodes`` dtype of each supported BVH width.
+BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE}
+
+
+def bvh_width(nodes: np.ndarray) -> int:
+    """The BVH width of a ``bvh_nodes`` table, from its dtype."""
+    for width, dtype in BVH_WIDTHS.items():
+        if nodes.dtype == dtype:
+            return width
+    raise ValueError(f"not a BVH node table: dtype {nodes.dtype}")
+
+
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
 MATERIAL_DTYPE = _build([("color", "float4", 1), ("flags", "int4", 1)], "f32")
@@ -208,7 +242,7 @@ TABLES: tuple[str, ...] = (
 
 
 def table_dtype(name: str, precision: Precision) -> np.dtype:
-    """The dtype of a named table at a precision (32-bit tables ignore it)."""
+    """The dtype of a named table at a precision (32-bit tables ignore it; ``bvh_nodes``: the binary one)."""
     fixed = {
         "settings": SETTINGS_DTYPE,
         "triangles": TRIANGLE_DTYPE,

@@ -52,7 +52,9 @@ def fresh_opencl():
 
 
 def upload(backend, scene: Scene) -> ScenePacker:
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -580,9 +582,9 @@ def test_deep_bvh_gets_a_deep_enough_stack_and_matches_brute_force(fresh_opencl,
     scene.set_camera((2.5, 0.0, 3.0), look_at=(2.5, 0.0, 0.0), fov_deg=70.0)
     packer = upload(fresh_opencl, scene)
     assert packer.packed is not None
-    depth = shared.bvh_depth(packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"])
-    assert depth > 33
-    assert fresh_opencl._defines()["BVH_STACK_SIZE"] >= depth
+    need = shared.stack_entries(packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"])
+    assert need > 33
+    assert fresh_opencl._defines()["BVH_STACK_SIZE"] >= need
     frame = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))
     fresh_opencl.extra_defines = {"BRUTE_FORCE": 1}
     brute = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))

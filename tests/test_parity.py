@@ -116,7 +116,9 @@ FAR_CASES = ["starter", "random-boxes"]
 
 def render(backend, scene: Scene, size: tuple[int, int]) -> Frame:
     """Pack for ``backend`` (camera-relative or not), upload everything, render every AOV."""
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -244,7 +246,9 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
     backend = backend_factory(backend_name, precision)
     reference = ReferenceBackend()
     scene = random_boxes(20, seed=9)
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     mover = scene.entity("box3")
     try:
         for step in range(4):

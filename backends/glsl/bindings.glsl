@@ -71,6 +71,22 @@ TriangleUv fetch_triangle_uv_(int i)
     return t;
 }
 
+#if BVH_WIDTH == 4
+Bvh4Node fetch_bvh_node_(int i)
+{
+    int b = i * BVH_NODES_STRIDE;
+    Bvh4Node n;
+    n.lo_x = F4_AT_(bvh_nodes_img, b);
+    n.lo_y = F4_AT_(bvh_nodes_img, b + 1);
+    n.lo_z = F4_AT_(bvh_nodes_img, b + 2);
+    n.hi_x = F4_AT_(bvh_nodes_img, b + 3);
+    n.hi_y = F4_AT_(bvh_nodes_img, b + 4);
+    n.hi_z = F4_AT_(bvh_nodes_img, b + 5);
+    n.child = I4_AT_(bvh_nodes_img, b + 6);
+    n.count = I4_AT_(bvh_nodes_img, b + 7);
+    return n;
+}
+#else
 BvhNode fetch_bvh_node_(int i)
 {
     int b = i * BVH_NODES_STRIDE;
@@ -79,6 +95,7 @@ BvhNode fetch_bvh_node_(int i)
     n.hi = F4_AT_(bvh_nodes_img, b + 1);
     return n;
 }
+#endif
 
 Material fetch_material_(int i)
 {
@@ -162,7 +179,7 @@ Camera fetch_camera_()
 layout(std430, binding = 0) readonly restrict buffer SettingsTable { Settings settings_data[]; };
 layout(std430, binding = 1) readonly restrict buffer TriangleTable { Triangle triangles_data[]; };
 layout(std430, binding = 2) readonly restrict buffer TriangleUvTable { TriangleUv triangle_uvs_data[]; };
-layout(std430, binding = 3) readonly restrict buffer BvhNodeTable { BvhNode bvh_nodes_data[]; };
+layout(std430, binding = 3) readonly restrict buffer BvhNodeTable { BvhRow bvh_nodes_data[]; };
 layout(std430, binding = 4) readonly restrict buffer InstanceTable { Instance instances_data[]; };
 layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material materials_data[]; };
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };

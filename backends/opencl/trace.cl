@@ -10,7 +10,7 @@
 __kernel void trace(__global const Settings* settings,
                     __global const Triangle* triangles,
                     __global const TriangleUv* triangle_uvs,
-                    __global const BvhNode* bvh_nodes,
+                    __global const BvhRow* bvh_nodes,
                     __global const Instance* instances,
                     __global const Material* materials,
                     __global const Aberration* aberrations,

@@ -320,6 +320,40 @@ FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k
 
 /* --- per-instance BVH traversal ------------------------------------------------------ */
 
+#if BVH_WIDTH == 4
+/* Push child lane L of a wide node if the ray crosses its box within (t_min, best.t] (slab_hit),
+ * keeping this node's pushes sorted with the nearest on top (an insertion step: at most 3 moves).
+ * A macro: the subset has no way to pass the stack arrays by reference. */
+#define BVH4_PUSH(L)                                                                                   \
+    if (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t && sp < BVH_STACK_SIZE) {     \
+        int j = sp;                                                                                    \
+        while (j > base && stack_t[j - 1] < tn.L) {                                                    \
+            stack_t[j] = stack_t[j - 1];                                                               \
+            stack_node[j] = stack_node[j - 1];                                                         \
+            stack_count[j] = stack_count[j - 1];                                                       \
+            j -= 1;                                                                                    \
+        }                                                                                              \
+        stack_t[j] = tn.L;                                                                             \
+        stack_node[j] = node.child.L;                                                                  \
+        stack_count[j] = node.count.L;                                                                 \
+        sp += 1;                                                                                       \
+    }
+/* Pop the next (child, count) still entered before the best hit into first/count; done if none. */
+#define BVH_POP()                                                                                      \
+    {                                                                                                  \
+        bool found = false;                                                                            \
+        while (sp > 0 && !found) {                                                                     \
+            sp -= 1;                                                                                   \
+            if (stack_t[sp] <= best.t) {                                                               \
+                first = stack_node[sp];                                                                \
+                count = stack_count[sp];                                                               \
+                found = true;                                                                          \
+            }                                                                                          \
+        }                                                                                              \
+        done = !found;                                                                                 \
+    }
+#endif
+
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
  * asset's BVH from its root, nearest child first, with a small stack. */
@@ -332,7 +366,32 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     bool cull = MATERIAL(inst.meta.y).flags.x != 0;
     ShearedRay sr = shear_ray(oo, dd);
     int root = inst.meta.x;
-#if BRUTE_FORCE
+#if BRUTE_FORCE && BVH_WIDTH == 4
+    /* As below, through the wide tree: slot 0 is never empty, the last used slot is the rightmost. */
+    Bvh4Node left = BVH_NODE(root);
+    while (left.count.x == 0) {
+        left = BVH_NODE(left.child.x);
+    }
+    int end = 0;
+    Bvh4Node right = BVH_NODE(root);
+    bool inner = true;
+    while (inner) {
+        int c = right.count.w >= 0 ? right.child.w
+                                   : (right.count.z >= 0 ? right.child.z : (right.count.y >= 0 ? right.child.y : right.child.x));
+        int n = right.count.w >= 0 ? right.count.w
+                                   : (right.count.z >= 0 ? right.count.z : (right.count.y >= 0 ? right.count.y : right.count.x));
+        inner = n == 0;
+        if (inner) {
+            right = BVH_NODE(c);
+        } else {
+            end = c + n;
+        }
+    }
+    for (int k = left.child.x; k < end; ++k) {
+        best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+    }
+    return best;
+#elif BRUTE_FORCE
     /* Every triangle (benchmarks: what the BVH saves). The asset's triangles are contiguous:
      * from its leftmost leaf's first to its rightmost leaf's end. */
     BvhNode left = BVH_NODE(root);
@@ -346,6 +405,52 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     int end = AS_INT(right.lo.w) + AS_INT(right.hi.w);
     for (int k = AS_INT(left.lo.w); k < end; ++k) {
         best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+    }
+    return best;
+#elif BVH_WIDTH == 4
+    /* The wide tree: one visit slabs the four children at once with 4-vector min/max (the slab()
+     * arithmetic lane by lane), pushes the children hit nearest-on-top and pops the nearest, so
+     * children are visited near to far. Stack entries are (child, count, entry t) as in the node. */
+    real3 inv = safe_inverse(dd);
+    real4 ox = R4(oo.x, oo.x, oo.x, oo.x);
+    real4 oy = R4(oo.y, oo.y, oo.y, oo.y);
+    real4 oz = R4(oo.z, oo.z, oo.z, oo.z);
+    real4 ix = R4(inv.x, inv.x, inv.x, inv.x);
+    real4 iy = R4(inv.y, inv.y, inv.y, inv.y);
+    real4 iz = R4(inv.z, inv.z, inv.z, inv.z);
+    real4 tiny = R4(REAL_TINY, REAL_TINY, REAL_TINY, REAL_TINY);
+    int stack_node[BVH_STACK_SIZE];
+    int stack_count[BVH_STACK_SIZE];
+    real stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    int first = root;
+    int count = 0;
+    bool done = false;
+    while (!done) {
+        while (count == 0 && !done) {
+            Bvh4Node node = BVH_NODE(first);
+            real4 tx0 = (TO_REAL4(node.lo_x) - ox) * ix;
+            real4 tx1 = (TO_REAL4(node.hi_x) - ox) * ix;
+            real4 ty0 = (TO_REAL4(node.lo_y) - oy) * iy;
+            real4 ty1 = (TO_REAL4(node.hi_y) - oy) * iy;
+            real4 tz0 = (TO_REAL4(node.lo_z) - oz) * iz;
+            real4 tz1 = (TO_REAL4(node.hi_z) - oz) * iz;
+            real4 tn = max(max(min(tx0, tx1), min(ty0, ty1)), min(tz0, tz1));
+            real4 tf = min(min(max(tx0, tx1), max(ty0, ty1)), max(tz0, tz1));
+            tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;
+            int base = sp;
+            BVH4_PUSH(x)
+            BVH4_PUSH(y)
+            BVH4_PUSH(z)
+            BVH4_PUSH(w)
+            BVH_POP()
+        }
+        if (!done) {
+            for (int k = first; k < first + count; ++k) {
+                best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+            }
+            BVH_POP()
+        }
     }
     return best;
 #else

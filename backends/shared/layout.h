@@ -41,6 +41,30 @@ STRUCT_BEGIN(BvhNode)
     float4 hi;
 STRUCT_END(BvhNode)
 
+/* bvh_nodes with BVH_WIDTH 4: a wide node, its four children's boxes SoA (lane i = child i).
+ * count[i] > 0: a leaf over triangles [child[i], child[i] + count[i]); count[i] == 0: the wide
+ * node child[i]; count[i] < 0: an empty slot. */
+STRUCT_BEGIN(Bvh4Node)
+    float4 lo_x;
+    float4 lo_y;
+    float4 lo_z;
+    float4 hi_x;
+    float4 hi_y;
+    float4 hi_z;
+    int4 child;
+    int4 count;
+STRUCT_END(Bvh4Node)
+
+/* The record of the bvh_nodes table: BVH_WIDTH (2 or 4) is the packer's bvh_width. */
+#ifndef BVH_WIDTH
+#define BVH_WIDTH 2
+#endif
+#if BVH_WIDTH == 4
+#define BvhRow Bvh4Node
+#else
+#define BvhRow BvhNode
+#endif
+
 /* materials: color = (r, g, b, checker cell size, 0 = none); flags.x = cull back faces. */
 STRUCT_BEGIN(Material)
     float4 color;
