@@ -26,7 +26,16 @@ import numpy as np
 
 from engine.layout import BVH4_NODE_DTYPE, BVH_NODE_DTYPE, BVH_WIDTHS
 
-__all__ = ["BUILDER_VERSION", "Bvh", "BvhParams", "build_bvh", "cached_bvh", "clear_memory_cache", "collapse"]
+__all__ = [
+    "BUILDER_VERSION",
+    "Bvh",
+    "BvhParams",
+    "build_bvh",
+    "cached_bvh",
+    "clear_memory_cache",
+    "collapse",
+    "leaf_blocks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -354,6 +363,29 @@ def collapse(bvh: Bvh) -> Bvh:
     nodes["child"] = np.where(empty, 0, np.where(wide_inner, wide_id, first[safe]))
     nodes["count"] = np.where(empty, -1, count[safe])
     return _frozen(nodes, bvh.triangle_order.copy(), bvh.params)
+
+
+def leaf_blocks(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks of 4 triangles for a wide tree's leaves: ``(lanes, child)``.
+
+    ``lanes`` (B, 4): each block's triangle rows (relative to the asset, -1 for padding), a leaf's
+    blocks consecutive, leaves in node order; ``child``: the nodes' ``child`` with each leaf slot
+    pointing at its first block instead of its first triangle (counts unchanged).
+    """
+    if bvh.width != 4:
+        raise ValueError("triangle blocks are for 4-wide trees")
+    count = bvh.nodes["count"].reshape(-1).astype(np.int64)
+    first = bvh.nodes["child"].reshape(-1).astype(np.int64)
+    leaf = count > 0
+    nblocks = (count[leaf] + 3) // 4
+    start = np.cumsum(nblocks) - nblocks
+    child = first.copy()
+    child[leaf] = start
+    owner = np.repeat(np.arange(nblocks.size), nblocks)  # the leaf of each block
+    j = np.arange(owner.size) - start[owner]  # block number inside its leaf
+    offset = 4 * j[:, None] + np.arange(4)[None, :]
+    lanes = np.where(offset < count[leaf][owner][:, None], first[leaf][owner][:, None] + offset, -1)
+    return lanes.astype(np.int32), child.reshape(bvh.nodes["child"].shape).astype(np.int32)
 
 
 def _frozen(nodes: np.ndarray, order: np.ndarray, params: BvhParams) -> Bvh:

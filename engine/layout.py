@@ -87,8 +87,10 @@ BVH_NODE_DTYPE = np.dtype(
 #: A 4-wide BVH node (``ScenePacker(bvh_width=4)``), 128 bytes: the boxes of its
 #: four children stored SoA, one ``float4`` per bound component (lane i = child
 #: i), so a visit is a few 4-vector min/max operations. ``child[i]`` and
-#: ``count[i]`` say what child i is: ``count > 0``, a leaf over triangles
-#: ``[child, child + count)``; ``count == 0``, the wide node ``child``;
+#: ``count[i]`` say what child i is: ``count > 0``, a leaf of ``count`` triangles
+#: (in the tree from :func:`engine.bvh.collapse`: triangles ``[child, child + count)``;
+#: packed: ``ceil(count / 4)`` rows of ``triangle_blocks`` from ``child``);
+#: ``count == 0``, the wide node ``child``;
 #: ``count < 0``, an empty slot (its box is a point at the origin: the count,
 #: not the box, rules it out). Children keep the binary tree's left-to-right
 #: order. Bounds are rounded outward; indices are absolute in the packed scene.
@@ -104,6 +106,13 @@ BVH4_NODE_DTYPE = _build(
         ("count", "int4", 1),
     ],
     "f32",
+)
+
+#: Four triangles of one wide-BVH leaf, SoA (lane i = triangle i): ``v0x = (v0.x of each)``, ... so the
+#: watertight test runs on four at once. ``index`` holds each lane's row in ``triangles`` (shading and
+#: ties use it), -1 for a padding lane. Only built with ``bvh_width=4``, whose leaves point at blocks.
+TRIANGLE_BLOCK_DTYPE = _build(
+    [(f"v{k}{axis}", "float4", 1) for k in range(3) for axis in "xyz"] + [("index", "int4", 1)], "f32"
 )
 
 #: The ``bvh_nodes`` dtype of each supported BVH width.
@@ -238,6 +247,7 @@ TABLES: tuple[str, ...] = (
     "materials",
     "aberrations",
     "portals",
+    "triangle_blocks",
 )
 
 
@@ -249,6 +259,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "triangle_uvs": TRIANGLE_UV_DTYPE,
         "bvh_nodes": BVH_NODE_DTYPE,
         "materials": MATERIAL_DTYPE,
+        "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
     }
     if name in fixed:
         return fixed[name]

@@ -318,6 +318,82 @@ FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k
     return best;
 }
 
+#if BVH_WIDTH == 4
+/* Keep lane hit (t, w0, w1, w2) of triangle k if it beats best: test_triangle's rule. */
+FORCE_INLINE MeshHit keep_nearer(MeshHit best, bool ok, real t, real u, real v, real w, int k, int row, real t_min)
+{
+    if (ok && t > t_min && (t < best.t || (t == best.t && row == best.instance && k < best.triangle))) {
+        best.t = t;
+        best.bary = R3(u, v, w);
+        best.instance = row;
+        best.triangle = k;
+    }
+    return best;
+}
+
+/* The x, y or z float4 of a block's vertex (axis i, per ray, once per block: not per lane). */
+#define BLOCK_AXIS(blk, V, i) TO_REAL4((i) == 0 ? blk.V##x : ((i) == 1 ? blk.V##y : blk.V##z))
+
+/* intersect_triangle on the four triangles of triangle_blocks row b at once: the same per-triangle
+ * arithmetic in 4-vectors (so the same watertight results, bit for bit), then test_triangle's rule
+ * lane by lane. Padding lanes (index -1) never hit. */
+FORCE_INLINE MeshHit test_block(SCENE_DECL MeshHit best, ShearedRay sr, int b, int row, bool cull, real t_min)
+{
+    TriangleBlock blk = TRIANGLE_BLOCK(b);
+#if EDGE_FALLBACK_FP64 && !REAL_IS_DOUBLE
+    /* Exact signs of zero edge functions are a per-lane branch: the scalar test keeps them exact. */
+    int4 index = blk.index;
+    for (int lane = 0; lane < 4; ++lane) {
+        int k = lane == 0 ? index.x : (lane == 1 ? index.y : (lane == 2 ? index.z : index.w));
+        if (k >= 0) {
+            best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+        }
+    }
+    return best;
+#else
+    real ox = VIDX3(sr.o, sr.kx);
+    real oy = VIDX3(sr.o, sr.ky);
+    real oz = VIDX3(sr.o, sr.kz);
+    real4 o_x = R4(ox, ox, ox, ox);
+    real4 o_y = R4(oy, oy, oy, oy);
+    real4 o_z = R4(oz, oz, oz, oz);
+    real4 s_x = R4(sr.s.x, sr.s.x, sr.s.x, sr.s.x);
+    real4 s_y = R4(sr.s.y, sr.s.y, sr.s.y, sr.s.y);
+    real4 s_z = R4(sr.s.z, sr.s.z, sr.s.z, sr.s.z);
+    real4 a_z = BLOCK_AXIS(blk, v0, sr.kz) - o_z;
+    real4 b_z = BLOCK_AXIS(blk, v1, sr.kz) - o_z;
+    real4 c_z = BLOCK_AXIS(blk, v2, sr.kz) - o_z;
+    PRECISE real4 ax = (BLOCK_AXIS(blk, v0, sr.kx) - o_x) - s_x * a_z;
+    PRECISE real4 ay = (BLOCK_AXIS(blk, v0, sr.ky) - o_y) - s_y * a_z;
+    PRECISE real4 bx = (BLOCK_AXIS(blk, v1, sr.kx) - o_x) - s_x * b_z;
+    PRECISE real4 by = (BLOCK_AXIS(blk, v1, sr.ky) - o_y) - s_y * b_z;
+    PRECISE real4 cx = (BLOCK_AXIS(blk, v2, sr.kx) - o_x) - s_x * c_z;
+    PRECISE real4 cy = (BLOCK_AXIS(blk, v2, sr.ky) - o_y) - s_y * c_z;
+    PRECISE real4 u = cx * by - cy * bx;
+    PRECISE real4 v = ax * cy - ay * cx;
+    PRECISE real4 w = bx * ay - by * ax;
+    real4 det = u + v + w;
+    real4 inv = R4(1.0f, 1.0f, 1.0f, 1.0f) / det;
+    real4 t = (u * (s_z * a_z) + v * (s_z * b_z) + w * (s_z * c_z)) * inv;
+    real4 uu = u * inv;
+    real4 vv = v * inv;
+    real4 ww = w * inv;
+    /* Per lane: front (or back without culling), det != 0, finite t and 1/det: intersect_triangle's tests. */
+#define BLOCK_LANE_OK(L)                                                                              \
+    (blk.index.L >= 0 &&                                                                              \
+     ((u.L >= REAL(0.0f) && v.L >= REAL(0.0f) && w.L >= REAL(0.0f)) ||                                \
+      (!cull && u.L <= REAL(0.0f) && v.L <= REAL(0.0f) && w.L <= REAL(0.0f))) &&                       \
+     det.L != REAL(0.0f) && ABS(t.L) < REAL_MAX && ABS(inv.L) < REAL_MAX)
+    best = keep_nearer(best, BLOCK_LANE_OK(x), t.x, uu.x, vv.x, ww.x, blk.index.x, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(y), t.y, uu.y, vv.y, ww.y, blk.index.y, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(z), t.z, uu.z, vv.z, ww.z, blk.index.z, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(w), t.w, uu.w, vv.w, ww.w, blk.index.w, row, t_min);
+#undef BLOCK_LANE_OK
+    return best;
+#endif
+}
+#endif
+
 /* --- per-instance BVH traversal ------------------------------------------------------ */
 
 #if BVH_WIDTH == 4
@@ -367,12 +443,14 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     ShearedRay sr = shear_ray(oo, dd);
     int root = inst.meta.x;
 #if BRUTE_FORCE && BVH_WIDTH == 4
-    /* As below, through the wide tree: slot 0 is never empty, the last used slot is the rightmost. */
+    /* As below, through the wide tree (slot 0 is never empty, the last used slot is the rightmost)
+     * and the leaves' blocks, whose index lanes name the triangles' rows. */
     Bvh4Node left = BVH_NODE(root);
     while (left.count.x == 0) {
         left = BVH_NODE(left.child.x);
     }
     int end = 0;
+    int begin = TRIANGLE_BLOCK(left.child.x).index.x;
     Bvh4Node right = BVH_NODE(root);
     bool inner = true;
     while (inner) {
@@ -384,10 +462,10 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
         if (inner) {
             right = BVH_NODE(c);
         } else {
-            end = c + n;
+            end = TRIANGLE_BLOCK(c).index.x + n; /* the leaf's blocks hold its n consecutive rows */
         }
     }
-    for (int k = left.child.x; k < end; ++k) {
+    for (int k = begin; k < end; ++k) {
         best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
     }
     return best;
@@ -446,8 +524,9 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
             BVH_POP()
         }
         if (!done) {
-            for (int k = first; k < first + count; ++k) {
-                best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+            /* A leaf: its (count + 3) / 4 blocks of 4 triangles. */
+            for (int b = first; b < first + (count + 3) / 4; ++b) {
+                best = test_block(SCENE_PASS best, sr, b, row, cull, t_min);
             }
             BVH_POP()
         }
