@@ -306,7 +306,9 @@ _TABLE_STRUCTS = {
     "materials": "Material",
     "aberrations": "Aberration",
     "portals": "Portal",
+    "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
+    "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
 }
 
 
@@ -335,7 +337,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
     import pyopencl as cl
 
     for table, struct in _TABLE_STRUCTS.items():
-        dtype = layout.table_dtype(table, precision)
+        dtype = layout.BVH4_NODE_DTYPE if table == "bvh4_nodes" else layout.table_dtype(table, precision)
         rows = _random_rows(dtype, 5, np.random.default_rng(7))
         stores, words = [], 0
         for kind, member in _members(struct):
