@@ -10,9 +10,13 @@ rules, so a drift between host and kernel is caught on the host.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``): always 32-bit. Vertices are
-  float32 in the assets, so a float64 tracer loses nothing by reading them as
-  float32; BVH bounds are rounded outward so any precision may traverse them.
+  ``bvh_nodes``, ``materials``, ``settings``, ``triangle_blocks``): always
+  32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
+  by reading them as float32; BVH bounds are rounded outward so any precision
+  may traverse them. ``bvh_nodes`` has one of two dtypes, chosen by the
+  packer's ``bvh_width`` (the backend's): binary :data:`BVH_NODE_DTYPE`, or
+  4-wide :data:`BVH4_NODE_DTYPE`, whose leaves name rows of
+  ``triangle_blocks`` (empty with binary trees).
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
   their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes

@@ -411,7 +411,7 @@ def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray) -> 
                 continue
             if count[i, s] > 0:
                 f, n = child[i, s], count[i, s]
-                assert 0 <= f and f + n <= m
+                assert f >= 0 and f + n <= m
                 covered[f : f + n] += 1
                 pts = corners[f : f + n].reshape(-1, 3)
                 sub_lo, sub_hi = pts.min(axis=0), pts.max(axis=0)

@@ -97,7 +97,7 @@ def test_bvh4_node_offsets() -> None:
     assert dtype.itemsize == 128
     names = ("lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z", "child", "count")
     assert {name: dtype.fields[name][1] for name in dtype.names} == {n: 16 * i for i, n in enumerate(names)}
-    assert layout.BVH_WIDTHS == {2: layout.BVH_NODE_DTYPE, 4: dtype}
+    assert {2: layout.BVH_NODE_DTYPE, 4: dtype} == layout.BVH_WIDTHS
     assert layout.bvh_width(np.zeros(3, dtype)) == 4 and layout.bvh_width(np.zeros(3, layout.BVH_NODE_DTYPE)) == 2
     with pytest.raises(ValueError, match="not a BVH node table"):
         layout.bvh_width(np.zeros(3, layout.TRIANGLE_DTYPE))

@@ -115,7 +115,7 @@ FAR_CASES = ["starter", "random-boxes"]
 
 
 def render(backend, scene: Scene, size: tuple[int, int], bvh_width: int | None = None) -> Frame:
-    """Pack for ``backend`` (camera-relative or not; its BVH width unless given), upload everything, render every AOV."""
+    """Pack for ``backend`` (camera-relative or not; its BVH width unless given), upload, render every AOV."""
     width = backend.bvh_width if bvh_width is None else bvh_width
     packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=width)
     updates = packer.sync(scene)

@@ -19,8 +19,9 @@
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
- *               BVH_NODE(i), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i)
- *               (records, from the bindings file)
+ *               BVH_NODE(i) (a BvhNode, or a Bvh4Node with BVH_WIDTH 4), INSTANCE(i),
+ *               MATERIAL(i), ABERRATION(i), PORTAL(i), TRIANGLE_BLOCK(i) (records, from
+ *               the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
@@ -34,6 +35,9 @@
  *                      (the packed origin can be 1e5 away while cells are 0.05)
  *   BRUTE_FORCE        test every triangle of an instance (benchmarks only)
  *   BVH_STACK_SIZE     traversal stack; the host checks every tree fits
+ *   BVH_WIDTH          2: binary nodes, one triangle at a time; 4: 4-wide nodes (child boxes SoA,
+ *                      slabbed with 4-vector ops) whose leaves are blocks of 4 triangles tested at
+ *                      once (layout.h; the packer's bvh_width, from the table's dtype)
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
