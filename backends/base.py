@@ -77,6 +77,8 @@ class Backend(ABC):
 
     #: Whether the packed tables should be relative to a floating origin near the camera.
     camera_relative: ClassVar[bool] = True
+    #: The BVH width its packer should build (``ScenePacker(bvh_width=...)``): what it traverses fastest.
+    bvh_width: ClassVar[int] = 2
 
     @classmethod
     @abstractmethod

@@ -118,7 +118,9 @@ class BackendHost:
         self._key = key
         try:
             if self._packer is None:
-                self._packer = ScenePacker(self.backend.precision, self.backend.camera_relative)
+                self._packer = ScenePacker(
+                    self.backend.precision, self.backend.camera_relative, bvh_width=self.backend.bvh_width
+                )
             updates = self._packer.sync(scene, view.position)
             if updates:
                 assert self._packer.packed is not None

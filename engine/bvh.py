@@ -2,6 +2,9 @@
 
 The tree is stored in :data:`engine.layout.BVH_NODE_DTYPE`, the exact bytes the
 kernels traverse. Indices are relative to the asset; the packer adds offsets.
+:func:`collapse` turns it into a 4-wide tree (:data:`engine.layout.BVH4_NODE_DTYPE`)
+for tracers that test four boxes at once with 4-vector operations; the wide tree
+has the same leaves, so the triangles' order is the binary tree's.
 
 Python cannot afford a per-node loop (a 200k-triangle mesh has ~100k nodes), so
 the builder is *level-synchronous*: every node of one tree level is binned,
@@ -21,9 +24,18 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.layout import BVH_NODE_DTYPE
+from engine.layout import BVH4_NODE_DTYPE, BVH_NODE_DTYPE, BVH_WIDTHS
 
-__all__ = ["BUILDER_VERSION", "Bvh", "BvhParams", "build_bvh", "cached_bvh", "clear_memory_cache"]
+__all__ = [
+    "BUILDER_VERSION",
+    "Bvh",
+    "BvhParams",
+    "build_bvh",
+    "cached_bvh",
+    "clear_memory_cache",
+    "collapse",
+    "leaf_blocks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -81,8 +93,23 @@ class Bvh:
     triangle_order: np.ndarray
     params: BvhParams
 
+    @property
+    def width(self) -> int:
+        """Children per node: 2 (:data:`BVH_NODE_DTYPE`) or 4 (:data:`BVH4_NODE_DTYPE`)."""
+        return 4 if self.nodes.dtype == BVH4_NODE_DTYPE else 2
+
     def depth(self) -> int:
-        """Number of nodes on the longest root-to-leaf path (a lone leaf has depth 1)."""
+        """Number of nodes on the longest root-to-leaf path (a lone binary leaf has depth 1).
+
+        A wide tree counts wide nodes only (its leaves live in its nodes' slots).
+        """
+        if self.width == 4:
+            child, count = self.nodes["child"], self.nodes["count"]
+            frontier, depth = np.zeros(1, np.int64), 0
+            while frontier.size:
+                depth += 1
+                frontier = child[frontier][count[frontier] == 0].astype(np.int64)
+            return depth
         first, count = self.nodes["first"], self.nodes["count"]
         frontier, depth = np.zeros(1, np.int64), 0
         while frontier.size:
@@ -92,7 +119,24 @@ class Bvh:
         return depth
 
     def sah_cost(self) -> float:
-        """SAH cost relative to the root's area: traversal_cost per inner node, 1 per triangle test."""
+        """SAH cost relative to the root's area: traversal_cost per inner node, 1 per triangle test.
+
+        The same formula for both widths (a wide node costs what a binary one does), so collapsing
+        can only lower it: each binary node pulled into its parent takes its term away.
+        """
+        if self.width == 4:
+            n = self.nodes
+            lo = np.stack([n["lo_x"], n["lo_y"], n["lo_z"]]).reshape(3, -1)
+            hi = np.stack([n["hi_x"], n["hi_y"], n["hi_z"]]).reshape(3, -1)
+            count = n["count"].reshape(-1)
+            used = count >= 0
+            lo, hi, count = lo[:, used], hi[:, used], count[used]
+            root = _half_area(lo[:, : int(used[:4].sum())].min(axis=1), hi[:, : int(used[:4].sum())].max(axis=1))
+            area = _half_area(lo, hi)
+            rel = area / root if np.isfinite(root) and root > 0 else np.ones_like(area)
+            inner = count == 0
+            inner_terms = 1.0 + rel[inner].sum()  # the root, then every wide child
+            return float(self.params.traversal_cost * inner_terms + (count[~inner] * rel[~inner]).sum())
         area = _half_area(self.nodes["bounds_min"].T, self.nodes["bounds_max"].T)
         rel = area / area[0] if np.isfinite(area[0]) and area[0] > 0 else np.ones_like(area)
         count = self.nodes["count"]
@@ -265,6 +309,85 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     return _frozen(nodes, order.astype(np.int32), params)
 
 
+def collapse(bvh: Bvh) -> Bvh:
+    """The 4-wide tree of a binary one: each wide node takes a binary node's two children, then pulls
+    up the children of its largest-area inner child until it has four (or only leaves).
+
+    Every pull removes one binary node and its SAH term (largest area first: the dearest to visit);
+    leaves and the triangles' order are unchanged. Level-synchronous like the builder: a few array
+    operations per level of the wide tree.
+    """
+    if bvh.width != 2:
+        raise ValueError(f"collapse takes a binary tree, got width {bvh.width}")
+    b = bvh.nodes
+    first, count = b["first"].astype(np.int64), b["count"].astype(np.int64)
+    inner = count == 0
+    area = _half_area(b["bounds_min"].T, b["bounds_max"].T)
+    rows: list[np.ndarray] = []  # per level: (F, 4) binary node ids in the slots, -1 empty
+    frontier = np.zeros(1, np.int64)
+    if not inner[0]:  # a lone leaf: one wide node holding it
+        rows.append(np.array([[0, -1, -1, -1]], np.int64))
+        frontier = frontier[:0]
+    col = np.arange(4)
+    while frontier.size:
+        f = frontier.size
+        slots = np.full((f, 4), -1, np.int64)
+        slots[:, 0], slots[:, 1] = first[frontier], first[frontier] + 1
+        r = np.arange(f)
+        for used in (2, 3):
+            safe = np.maximum(slots, 0)
+            pullable = (slots >= 0) & inner[safe]
+            pick = np.argmax(np.where(pullable, area[safe], -1.0), axis=1)
+            can = pullable[r, pick]
+            picked = slots[r, pick]
+            # Insert the picked node's two children in its place: the left-to-right order stays.
+            src = np.where(col[None, :] <= pick[:, None], col[None, :], col[None, :] - 1)
+            grown = slots[r[:, None], src]
+            grown[r, pick] = first[np.maximum(picked, 0)]
+            grown[r, np.minimum(pick + 1, used)] = first[np.maximum(picked, 0)] + 1
+            slots = np.where(can[:, None], grown, slots)
+        rows.append(slots)
+        flat = slots.ravel()
+        frontier = flat[(flat >= 0) & inner[np.maximum(flat, 0)]]
+    slots = np.concatenate(rows)
+    wide_inner = (slots >= 0) & inner[np.maximum(slots, 0)]
+    # Wide nodes are numbered in level order, and inner slots in row-major order are exactly that order.
+    wide_id = np.zeros(slots.shape, np.int64)
+    wide_id[wide_inner] = np.arange(1, int(wide_inner.sum()) + 1)
+    safe = np.maximum(slots, 0)
+    nodes = np.zeros(len(slots), BVH4_NODE_DTYPE)
+    empty = slots < 0
+    for k, axis in enumerate("xyz"):
+        nodes[f"lo_{axis}"] = np.where(empty, 0.0, b["bounds_min"][safe, k])
+        nodes[f"hi_{axis}"] = np.where(empty, 0.0, b["bounds_max"][safe, k])
+    nodes["child"] = np.where(empty, 0, np.where(wide_inner, wide_id, first[safe]))
+    nodes["count"] = np.where(empty, -1, count[safe])
+    return _frozen(nodes, bvh.triangle_order.copy(), bvh.params)
+
+
+def leaf_blocks(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks of 4 triangles for a wide tree's leaves: ``(lanes, child)``.
+
+    ``lanes`` (B, 4): each block's triangle rows (relative to the asset, -1 for padding), a leaf's
+    blocks consecutive, leaves in node order; ``child``: the nodes' ``child`` with each leaf slot
+    pointing at its first block instead of its first triangle (counts unchanged).
+    """
+    if bvh.width != 4:
+        raise ValueError("triangle blocks are for 4-wide trees")
+    count = bvh.nodes["count"].reshape(-1).astype(np.int64)
+    first = bvh.nodes["child"].reshape(-1).astype(np.int64)
+    leaf = count > 0
+    nblocks = (count[leaf] + 3) // 4
+    start = np.cumsum(nblocks) - nblocks
+    child = first.copy()
+    child[leaf] = start
+    owner = np.repeat(np.arange(nblocks.size), nblocks)  # the leaf of each block
+    j = np.arange(owner.size) - start[owner]  # block number inside its leaf
+    offset = 4 * j[:, None] + np.arange(4)[None, :]
+    lanes = np.where(offset < count[leaf][owner][:, None], first[leaf][owner][:, None] + offset, -1)
+    return lanes.astype(np.int32), child.reshape(bvh.nodes["child"].shape).astype(np.int32)
+
+
 def _frozen(nodes: np.ndarray, order: np.ndarray, params: BvhParams) -> Bvh:
     """A Bvh whose arrays are read-only: cached trees are shared between callers."""
     nodes.flags.writeable = False
@@ -288,25 +411,27 @@ def _default_cache_dir() -> Path:
     return Path(env) if env else Path.home() / ".cache" / "aberrant"
 
 
-def _cache_key(verts: np.ndarray, tris: np.ndarray, params: BvhParams) -> str:
-    """Content hash of the geometry, the parameters and the builder version."""
+def _cache_key(verts: np.ndarray, tris: np.ndarray, params: BvhParams, width: int = 2) -> str:
+    """Content hash of the geometry, the parameters, the width and the builder version."""
     h = hashlib.sha256()
-    h.update(f"bvh-v{BUILDER_VERSION};{verts.shape};{tris.shape};{params!r};".encode())
+    h.update(f"bvh-v{BUILDER_VERSION};w{width};{verts.shape};{tris.shape};{params!r};".encode())
     h.update(verts.tobytes())
     h.update(tris.tobytes())
     return h.hexdigest()
 
 
-def _load(path: Path, key: str, m: int, params: BvhParams) -> Bvh:
+def _load(path: Path, key: str, m: int, params: BvhParams, width: int = 2) -> Bvh:
     """Read a cached tree, checking it is whole; raises on anything suspicious."""
     with np.load(path, allow_pickle=False) as data:
         if str(data["key"]) != key:
             raise ValueError("cache key mismatch")
         raw = np.ascontiguousarray(data["nodes"], dtype=np.int32)
         order = np.ascontiguousarray(data["triangle_order"], dtype=np.int32)
-    if raw.ndim != 2 or raw.shape[1] != 8 or not 1 <= len(raw) <= 2 * m - 1 or order.shape != (m,):
+    dtype = BVH_WIDTHS[width]
+    columns = dtype.itemsize // 4
+    if raw.ndim != 2 or raw.shape[1] != columns or not 1 <= len(raw) <= 2 * m - 1 or order.shape != (m,):
         raise ValueError("cached arrays have the wrong shape")
-    nodes = raw.view(BVH_NODE_DTYPE).reshape(-1).copy()
+    nodes = raw.view(dtype).reshape(-1).copy()
     if not (np.sort(order) == np.arange(m)).all():
         raise ValueError("cached triangle_order is not a permutation")
     return _frozen(nodes, order, params)
@@ -318,7 +443,7 @@ def _save(path: Path, key: str, bvh: Bvh) -> None:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.stem, suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
-            raw = np.ascontiguousarray(bvh.nodes).view(np.int32).reshape(-1, 8)
+            raw = np.ascontiguousarray(bvh.nodes).view(np.int32).reshape(len(bvh.nodes), -1)
             np.savez(fh, key=np.array(key), nodes=raw, triangle_order=bvh.triangle_order)
         os.replace(tmp, path)
     except BaseException:
@@ -331,10 +456,14 @@ def cached_bvh(
     faces: np.ndarray,
     params: BvhParams = BvhParams(),
     cache_dir: Path | None = None,
+    width: int = 2,
 ) -> Bvh:
-    """:func:`build_bvh` behind an in-process and an on-disk cache keyed by content."""
+    """:func:`build_bvh` (then :func:`collapse` for ``width=4``) behind an in-process and an on-disk
+    cache keyed by content, parameters and width."""
+    if width not in BVH_WIDTHS:
+        raise ValueError(f"BVH width must be one of {sorted(BVH_WIDTHS)}, got {width!r}")
     verts, tris = _validated(vertices, faces)
-    key = _cache_key(verts, tris, params)
+    key = _cache_key(verts, tris, params, width)
     hit = _MEMORY_CACHE.get(key)
     if hit is not None:
         return hit
@@ -342,11 +471,11 @@ def cached_bvh(
     bvh: Bvh | None = None
     if path.exists():
         try:
-            bvh = _load(path, key, len(tris), params)
+            bvh = _load(path, key, len(tris), params, width)
         except Exception as exc:  # a corrupt or foreign file is only a cache miss
             log.debug("rebuilding BVH: cannot use cache file %s (%s)", path, exc)
     if bvh is None:
-        bvh = build_bvh(verts, tris, params)
+        bvh = build_bvh(verts, tris, params) if width == 2 else collapse(cached_bvh(verts, tris, params, cache_dir))
         try:
             _save(path, key, bvh)
         except OSError as exc:

@@ -10,9 +10,13 @@ rules, so a drift between host and kernel is caught on the host.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``): always 32-bit. Vertices are
-  float32 in the assets, so a float64 tracer loses nothing by reading them as
-  float32; BVH bounds are rounded outward so any precision may traverse them.
+  ``bvh_nodes``, ``materials``, ``settings``, ``triangle_blocks``): always
+  32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
+  by reading them as float32; BVH bounds are rounded outward so any precision
+  may traverse them. ``bvh_nodes`` has one of two dtypes, chosen by the
+  packer's ``bvh_width`` (the backend's): binary :data:`BVH_NODE_DTYPE`, or
+  4-wide :data:`BVH4_NODE_DTYPE`, whose leaves name rows of
+  ``triangle_blocks`` (empty with binary trees).
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
   their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
@@ -83,6 +87,49 @@ BVH_NODE_DTYPE = np.dtype(
         "itemsize": 32,
     }
 )
+
+#: A 4-wide BVH node (``ScenePacker(bvh_width=4)``), 128 bytes: the boxes of its
+#: four children stored SoA, one ``float4`` per bound component (lane i = child
+#: i), so a visit is a few 4-vector min/max operations. ``child[i]`` and
+#: ``count[i]`` say what child i is: ``count > 0``, a leaf of ``count`` triangles
+#: (in the tree from :func:`engine.bvh.collapse`: triangles ``[child, child + count)``;
+#: packed: ``ceil(count / 4)`` rows of ``triangle_blocks`` from ``child``);
+#: ``count == 0``, the wide node ``child``;
+#: ``count < 0``, an empty slot (its box is a point at the origin: the count,
+#: not the box, rules it out). Children keep the binary tree's left-to-right
+#: order. Bounds are rounded outward; indices are absolute in the packed scene.
+BVH4_NODE_DTYPE = _build(
+    [
+        ("lo_x", "float4", 1),
+        ("lo_y", "float4", 1),
+        ("lo_z", "float4", 1),
+        ("hi_x", "float4", 1),
+        ("hi_y", "float4", 1),
+        ("hi_z", "float4", 1),
+        ("child", "int4", 1),
+        ("count", "int4", 1),
+    ],
+    "f32",
+)
+
+#: Four triangles of one wide-BVH leaf, SoA (lane i = triangle i): ``v0x = (v0.x of each)``, ... so the
+#: watertight test runs on four at once. ``index`` holds each lane's row in ``triangles`` (shading and
+#: ties use it), -1 for a padding lane. Only built with ``bvh_width=4``, whose leaves point at blocks.
+TRIANGLE_BLOCK_DTYPE = _build(
+    [(f"v{k}{axis}", "float4", 1) for k in range(3) for axis in "xyz"] + [("index", "int4", 1)], "f32"
+)
+
+#: The ``bvh_nodes`` dtype of each supported BVH width.
+BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE}
+
+
+def bvh_width(nodes: np.ndarray) -> int:
+    """The BVH width of a ``bvh_nodes`` table, from its dtype."""
+    for width, dtype in BVH_WIDTHS.items():
+        if nodes.dtype == dtype:
+            return width
+    raise ValueError(f"not a BVH node table: dtype {nodes.dtype}")
+
 
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
@@ -204,17 +251,19 @@ TABLES: tuple[str, ...] = (
     "materials",
     "aberrations",
     "portals",
+    "triangle_blocks",
 )
 
 
 def table_dtype(name: str, precision: Precision) -> np.dtype:
-    """The dtype of a named table at a precision (32-bit tables ignore it)."""
+    """The dtype of a named table at a precision (32-bit tables ignore it; ``bvh_nodes``: the binary one)."""
     fixed = {
         "settings": SETTINGS_DTYPE,
         "triangles": TRIANGLE_DTYPE,
         "triangle_uvs": TRIANGLE_UV_DTYPE,
         "bvh_nodes": BVH_NODE_DTYPE,
         "materials": MATERIAL_DTYPE,
+        "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
     }
     if name in fixed:
         return fixed[name]

@@ -22,7 +22,7 @@ import numpy as np
 
 from components import Aberration, Mesh, Portal, Transform
 from engine import layout
-from engine.bvh import BvhParams, cached_bvh
+from engine.bvh import BvhParams, cached_bvh, leaf_blocks
 from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
@@ -161,8 +161,13 @@ class ScenePacker:
         camera_relative: bool = True,
         origin_cell: float = 16.0,
         bvh_params: BvhParams | None = None,
+        bvh_width: int = 2,
     ) -> None:
+        if bvh_width not in layout.BVH_WIDTHS:
+            raise ValueError(f"bvh_width must be one of {sorted(layout.BVH_WIDTHS)}, got {bvh_width!r}")
         self.precision: Precision = precision
+        #: Children per BVH node in ``bvh_nodes`` (the backend's ``bvh_width``: what it traverses fastest).
+        self.bvh_width = bvh_width
         self.camera_relative = camera_relative
         self.origin_cell = origin_cell
         self.bvh_params = bvh_params or BvhParams()
@@ -259,15 +264,15 @@ class ScenePacker:
         old_versions = self.packed.versions if self.packed is not None else {}
         meshes = scene.query(Transform, Mesh)
         self._instance_row = {entity: row for row, (entity, _) in enumerate(meshes)}
-        tris, uvs, nodes = [], [], []
+        tris, uvs, nodes, blocks = [], [], [], []
         self._asset_roots = {}
         self._asset_flags: dict[str, int] = {}
-        node_base = tri_base = 0
+        node_base = tri_base = block_base = 0
         for _, (_, mesh) in meshes:
             asset = scene.asset(mesh.asset)
             if asset.content_hash in self._asset_roots:
                 continue
-            bvh = cached_bvh(asset.vertices, asset.faces, self.bvh_params)
+            bvh = cached_bvh(asset.vertices, asset.faces, self.bvh_params, width=self.bvh_width)
             faces = asset.faces[bvh.triangle_order]
             t = np.zeros(len(faces), dtype=layout.TRIANGLE_DTYPE)
             for k, name in enumerate(("v0", "v1", "v2")):
@@ -278,7 +283,18 @@ class ScenePacker:
                 u["uv01"][:, 2:] = asset.uvs[faces[:, 1]]
                 u["uv2"][:, :2] = asset.uvs[faces[:, 2]]
             n = bvh.nodes.copy()
-            n["first"] += np.where(n["count"] > 0, tri_base, node_base)
+            if self.bvh_width == 2:
+                n["first"] += np.where(n["count"] > 0, tri_base, node_base)
+            else:  # leaves point at their blocks of 4 triangles; empty slots (count < 0) keep child 0
+                lanes, child = leaf_blocks(bvh)
+                n["child"] = child + np.where(n["count"] > 0, block_base, np.where(n["count"] == 0, node_base, 0))
+                b = np.zeros(len(lanes), dtype=layout.TRIANGLE_BLOCK_DTYPE)
+                for k in range(3):
+                    for a, axis in enumerate("xyz"):
+                        b[f"v{k}{axis}"] = np.where(lanes >= 0, t[f"v{k}"][np.maximum(lanes, 0), a], 0.0)
+                b["index"] = np.where(lanes >= 0, lanes + tri_base, -1)
+                blocks.append(b)
+                block_base += len(b)
             self._asset_roots[asset.content_hash] = node_base
             self._asset_flags[asset.content_hash] = layout.INSTANCE_FLAG_HAS_UVS if asset.uvs is not None else 0
             tris.append(t)
@@ -289,7 +305,8 @@ class ScenePacker:
         tables = {
             "triangles": np.concatenate(tris) if tris else np.zeros(0, layout.TRIANGLE_DTYPE),
             "triangle_uvs": np.concatenate(uvs) if uvs else np.zeros(0, layout.TRIANGLE_UV_DTYPE),
-            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, layout.BVH_NODE_DTYPE),
+            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, layout.BVH_WIDTHS[self.bvh_width]),
+            "triangle_blocks": np.concatenate(blocks) if blocks else np.zeros(0, layout.TRIANGLE_BLOCK_DTYPE),
         }
         counts = {name: len(t) for name, t in tables.items()}
         tables = {name: _at_least_one_row(t) for name, t in tables.items()}

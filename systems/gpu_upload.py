@@ -23,7 +23,9 @@ class GpuUploadProcessor(esper.Processor):
         self.scene = scene
         self.backend = backend
         self.stats = stats
-        self.packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+        self.packer = ScenePacker(
+            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+        )
 
     @property
     def packed(self) -> PackedScene | None:

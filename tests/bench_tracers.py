@@ -67,7 +67,9 @@ def assets(tmp_path_factory) -> Path:
 
 def _bench(benchmark, backend, scene: Scene, rounds: int | None = None) -> None:
     """Upload once, then time whole frames (dispatch and read-back of the colour)."""
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)

@@ -223,7 +223,9 @@ def singular_pixels(scene: Scene, width: int, height: int, boxes: list[Transform
 def upload_to_reference(scene: Scene) -> ReferenceBackend:
     """A reference backend holding ``scene`` (packed as the reference wants it)."""
     backend = ReferenceBackend()
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)

@@ -9,8 +9,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import engine.bvh as bvh_mod
-from engine.bvh import Bvh, BvhParams, build_bvh, cached_bvh, clear_memory_cache
-from engine.layout import BVH_NODE_DTYPE
+from engine.bvh import Bvh, BvhParams, build_bvh, cached_bvh, clear_memory_cache, collapse, leaf_blocks
+from engine.layout import BVH4_NODE_DTYPE, BVH_NODE_DTYPE
 
 # --- meshes ------------------------------------------------------------------
 
@@ -382,3 +382,122 @@ def test_bad_input_is_refused(tmp_path, entry, change, message):
 def test_bad_params_are_refused(kwargs, field):
     with pytest.raises(ValueError, match=field):
         BvhParams(**kwargs)
+
+
+# --- the 4-wide tree (collapse) and its triangle blocks --------------------------------
+
+
+def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray) -> None:
+    """Every triangle in exactly one leaf slot, every wide node reached once, child boxes hold their subtree."""
+    nodes, m = wide.nodes, len(faces)
+    assert nodes.dtype == BVH4_NODE_DTYPE and wide.width == 4
+    np.testing.assert_array_equal(wide.triangle_order, binary.triangle_order)
+    lo = np.stack([nodes["lo_x"], nodes["lo_y"], nodes["lo_z"]], axis=-1)  # (N, 4, 3)
+    hi = np.stack([nodes["hi_x"], nodes["hi_y"], nodes["hi_z"]], axis=-1)
+    child, count = nodes["child"].astype(np.int64), nodes["count"].astype(np.int64)
+    assert (count[:, 0] >= 0).all(), "slot 0 is never empty"
+    used = count >= 0
+    assert (used[:, 1:] <= used[:, :-1]).all(), "empty slots come last"
+    visits = np.zeros(len(nodes), np.int64)
+    covered = np.zeros(m, np.int64)
+    corners = verts[faces[binary.triangle_order]]  # (m, 3, 3) in leaf order
+
+    def walk(i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Visit node i; returns the exact bounds of the triangles under it."""
+        visits[i] += 1
+        box_lo, box_hi = np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32)
+        for s in range(4):
+            if count[i, s] < 0:
+                continue
+            if count[i, s] > 0:
+                f, n = child[i, s], count[i, s]
+                assert f >= 0 and f + n <= m
+                covered[f : f + n] += 1
+                pts = corners[f : f + n].reshape(-1, 3)
+                sub_lo, sub_hi = pts.min(axis=0), pts.max(axis=0)
+            else:
+                assert i < child[i, s] < len(nodes), f"node {i}: bad child {child[i, s]}"
+                sub_lo, sub_hi = walk(int(child[i, s]))
+            assert (lo[i, s] < sub_lo).all() and (sub_hi < hi[i, s]).all(), "child box holds its subtree (outward)"
+            box_lo, box_hi = np.minimum(box_lo, sub_lo), np.maximum(box_hi, sub_hi)
+        return box_lo, box_hi
+
+    walk(0)
+    assert (visits == 1).all(), "every wide node is reached exactly once"
+    assert (covered == 1).all(), "every triangle is in exactly one leaf"
+    leaves = np.sort(count[count > 0])
+    np.testing.assert_array_equal(leaves, np.sort(binary.nodes["count"][binary.nodes["count"] > 0]))
+    assert wide.depth() <= binary.depth()
+
+
+@pytest.mark.parametrize("params", PARAMS, ids=["default", "leaf1-bins2", "leaf8-bins32"])
+@pytest.mark.parametrize("name", list(MESHES))
+def test_collapse_to_four_wide(name, params):
+    verts, faces = MESHES[name]()
+    binary = build_bvh(verts, faces, params)
+    wide = collapse(binary)
+    check_wide(wide, binary, verts, faces)
+    if len(binary.nodes) > 1:  # a lone leaf gains a root node; otherwise pulling nodes up only removes terms
+        assert wide.sah_cost() <= binary.sah_cost() + 1e-9
+    if len(binary.nodes) >= 7:  # enough nodes to pull: the wide tree is strictly cheaper and shallower
+        assert wide.sah_cost() < binary.sah_cost()
+        assert len(wide.nodes) < len(binary.nodes)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    corners=st.lists(
+        st.lists(st.lists(st.integers(-3, 3), min_size=3, max_size=3), min_size=3, max_size=3),
+        min_size=1,
+        max_size=60,
+    ),
+    leaf=st.integers(1, 5),
+)
+def test_collapse_on_small_integer_soups(corners, leaf):
+    verts, faces = _from_corners(np.array(corners, np.float32) * 0.5)
+    binary = build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=4))
+    check_wide(collapse(binary), binary, verts, faces)
+
+
+def test_collapse_fills_nodes_and_pulls_the_largest_child():
+    """A balanced tree of 16 leaves collapses to a root of 4 nodes of 4 leaves each: 5 wide nodes."""
+    verts, faces = _from_corners([[[x, y, 0], [x + 0.5, y, 0], [x, y + 0.5, 0]] for x in range(4) for y in range(4)])
+    binary = build_bvh(verts * 10, faces, BvhParams(max_leaf_size=1))
+    wide = collapse(binary)
+    check_wide(wide, binary, verts * 10, faces)
+    assert len(wide.nodes) == 5 and (wide.nodes["count"] >= 0).all()
+    with pytest.raises(ValueError, match="binary"):
+        collapse(wide)
+
+
+def test_leaf_blocks_cover_every_leaf_in_fours():
+    verts, faces = _soup(3000, seed=3)
+    wide = collapse(build_bvh(verts, faces, BvhParams(max_leaf_size=6)))
+    lanes, child = leaf_blocks(wide)
+    count = wide.nodes["count"]
+    assert lanes.shape[1] == 4 and child.shape == count.shape
+    np.testing.assert_array_equal(child[count == 0], wide.nodes["child"][count == 0])
+    seen = []
+    for first_block, n, first_tri in zip(
+        child[count > 0], count[count > 0], wide.nodes["child"][count > 0], strict=True
+    ):
+        block = lanes[first_block : first_block + (n + 3) // 4].ravel()
+        np.testing.assert_array_equal(block[:n], np.arange(first_tri, first_tri + n))
+        assert (block[n:] == -1).all(), "padding lanes are -1"
+        seen.append(block[:n])
+    np.testing.assert_array_equal(np.sort(np.concatenate(seen)), np.arange(len(faces)))
+    assert len(lanes) == int(((count[count > 0] + 3) // 4).sum())
+
+
+def test_wide_trees_are_cached_by_width(tmp_path, fresh_memory, monkeypatch):
+    verts, faces = MESHES["icosphere"]()
+    binary = cached_bvh(verts, faces, cache_dir=tmp_path)
+    wide = cached_bvh(verts, faces, cache_dir=tmp_path, width=4)
+    assert binary.width == 2 and wide.width == 4
+    assert len(list((tmp_path / "bvh").glob("*.npz"))) == 2, "the width is part of the key"
+    clear_memory_cache()
+    monkeypatch.setattr(bvh_mod, "build_bvh", _refuse_to_build)
+    monkeypatch.setattr(bvh_mod, "collapse", _refuse_to_build)
+    _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=4), wide)
+    with pytest.raises(ValueError, match="width"):
+        cached_bvh(verts, faces, cache_dir=tmp_path, width=3)

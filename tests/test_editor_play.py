@@ -76,6 +76,7 @@ class _Failing:
     name = "failing"
     precision = "f32"
     camera_relative = True
+    bvh_width = 2
 
     def upload(self, packed, updates):
         return 0

@@ -40,7 +40,9 @@ def fresh_glsl(request):
 
 
 def upload(backend, scene: Scene) -> ScenePacker:
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -121,7 +123,9 @@ _TABLE_STRUCTS = {
     "materials": "Material",
     "aberrations": "Aberration",
     "portals": "Portal",
+    "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
+    "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
 }
 
 
@@ -154,7 +158,9 @@ _ACCESSORS = {
     "materials": "MATERIAL(i)",
     "aberrations": "ABERRATION(i)",
     "portals": "PORTAL(i)",
+    "triangle_blocks": "TRIANGLE_BLOCK(i)",
     "camera": "CAMERA_ROW",
+    "bvh4_nodes": "BVH_NODE(i)",
 }
 
 
@@ -169,7 +175,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
     """
     backend = backend_factory("glsl", precision)
     struct = _TABLE_STRUCTS[table]
-    dtype = layout.table_dtype(table, precision)
+    dtype = layout.BVH4_NODE_DTYPE if table == "bvh4_nodes" else layout.table_dtype(table, precision)
     single = table in ("settings", "camera")  # the core reads row 0 only
     rows = _random_rows(dtype, 1 if single and store == "image" else 5, np.random.default_rng(7))
     stores, words = [], 0
@@ -189,6 +195,8 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
     defines = {"REAL_IS_DOUBLE": int(precision == "f64")}
     if store == "image":
         defines.update(backend._defines(()), TABLES_IN_IMAGES=1)
+        if table == "bvh4_nodes":
+            defines.update(BVH_WIDTH=4, BVH_NODES_STRIDE=dtype.itemsize // 16)
         head = shared.read("bindings.glsl", "backends.glsl")
         read = f"{struct} record = {_ACCESSORS[table]};"
     else:
@@ -215,7 +223,8 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
         if store == "image":
             src = backend._image(len(rows) * dtype.itemsize // 16)
             _write_texels(src, 0, rows.view(np.uint32).reshape(-1, 4))
-            unit = CAMERA_IMAGE if table == "camera" else layout.TABLES.index(table) + 1
+            name = "bvh_nodes" if table == "bvh4_nodes" else table
+            unit = CAMERA_IMAGE if table == "camera" else layout.TABLES.index(name) + 1
             src.bind_to_image(unit, read=True, write=False)
         else:
             src = ctx.buffer(rows)

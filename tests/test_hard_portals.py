@@ -99,7 +99,9 @@ def reference_ray(scene: Scene, origin: Sequence[float], direction: Sequence[flo
     """(events, instance) of one exact float64 ray through the scene."""
     backend = ReferenceBackend()
     try:
-        packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+        packer = ScenePacker(
+            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+        )
         updates = packer.sync(scene)
         assert packer.packed is not None
         backend.upload(packer.packed, updates)

@@ -16,6 +16,21 @@ EXPECTED = {
     ("triangle_uvs", "f32"): ({"uv01": 0, "uv2": 16}, 32),
     ("bvh_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
     ("materials", "f32"): ({"color": 0, "flags": 16}, 32),
+    ("triangle_blocks", "f32"): (
+        {
+            "v0x": 0,
+            "v0y": 16,
+            "v0z": 32,
+            "v1x": 48,
+            "v1y": 64,
+            "v1z": 80,
+            "v2x": 96,
+            "v2y": 112,
+            "v2z": 128,
+            "index": 144,
+        },
+        160,
+    ),
     ("instances", "f32"): ({"world_to_object": 0, "bounds_min": 48, "bounds_max": 64, "meta": 80}, 96),
     ("instances", "f64"): ({"world_to_object": 0, "bounds_min": 96, "bounds_max": 128, "meta": 160}, 192),
     ("aberrations", "f32"): ({"world_to_local": 0, "rotation": 48, "deformation": 96, "meta": 112}, 128),
@@ -74,6 +89,18 @@ def test_records_are_whole_vectors(table: str, precision: str) -> None:
     for name in dtype.names:
         base = dtype.fields[name][0].base
         assert base in (np.dtype(np.float32), np.dtype(np.float64), np.dtype(np.int32))
+
+
+def test_bvh4_node_offsets() -> None:
+    """The 4-wide node (bvh_nodes of ScenePacker(bvh_width=4)): six float4 bounds, then child and count int4s."""
+    dtype = layout.BVH4_NODE_DTYPE
+    assert dtype.itemsize == 128
+    names = ("lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z", "child", "count")
+    assert {name: dtype.fields[name][1] for name in dtype.names} == {n: 16 * i for i, n in enumerate(names)}
+    assert {2: layout.BVH_NODE_DTYPE, 4: dtype} == layout.BVH_WIDTHS
+    assert layout.bvh_width(np.zeros(3, dtype)) == 4 and layout.bvh_width(np.zeros(3, layout.BVH_NODE_DTYPE)) == 2
+    with pytest.raises(ValueError, match="not a BVH node table"):
+        layout.bvh_width(np.zeros(3, layout.TRIANGLE_DTYPE))
 
 
 def test_precision_only_changes_real_tables() -> None:

@@ -52,7 +52,9 @@ def fresh_opencl():
 
 
 def upload(backend, scene: Scene) -> ScenePacker:
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -304,7 +306,9 @@ _TABLE_STRUCTS = {
     "materials": "Material",
     "aberrations": "Aberration",
     "portals": "Portal",
+    "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
+    "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
 }
 
 
@@ -333,7 +337,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
     import pyopencl as cl
 
     for table, struct in _TABLE_STRUCTS.items():
-        dtype = layout.table_dtype(table, precision)
+        dtype = layout.BVH4_NODE_DTYPE if table == "bvh4_nodes" else layout.table_dtype(table, precision)
         rows = _random_rows(dtype, 5, np.random.default_rng(7))
         stores, words = [], 0
         for kind, member in _members(struct):
@@ -580,9 +584,9 @@ def test_deep_bvh_gets_a_deep_enough_stack_and_matches_brute_force(fresh_opencl,
     scene.set_camera((2.5, 0.0, 3.0), look_at=(2.5, 0.0, 0.0), fov_deg=70.0)
     packer = upload(fresh_opencl, scene)
     assert packer.packed is not None
-    depth = shared.bvh_depth(packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"])
-    assert depth > 33
-    assert fresh_opencl._defines()["BVH_STACK_SIZE"] >= depth
+    need = shared.stack_entries(packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"])
+    assert need > 33
+    assert fresh_opencl._defines()["BVH_STACK_SIZE"] >= need
     frame = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))
     fresh_opencl.extra_defines = {"BRUTE_FORCE": 1}
     brute = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))

@@ -204,3 +204,44 @@ def test_camera_row_and_primary_rays() -> None:
     assert np.all(d[:, 0, 0] < 0) and np.all(d[:, -1, 0] > 0)
     lo, hi = view.sigma_bounds(2.0)
     np.testing.assert_allclose(lo[2], hi[2])  # the view axis of a level camera collapses
+
+
+def test_wide_bvh_packing_points_leaves_at_triangle_blocks():
+    """bvh_width=4: 4-wide nodes whose leaves name blocks of 4 triangles; every triangle row is in one block lane."""
+    from engine import layout
+
+    scene = small_scene()
+    scene.add_mesh("ball", "sphere", position=(0, 2, -3))
+    binary = ScenePacker(bvh_width=2)
+    binary.sync(scene)
+    wide = ScenePacker(bvh_width=4)
+    wide.sync(scene)
+    assert binary.packed is not None and wide.packed is not None
+    assert binary.packed.counts["triangle_blocks"] == 0
+    nodes, blocks = wide.packed.tables["bvh_nodes"], wide.packed.tables["triangle_blocks"]
+    assert nodes.dtype == layout.BVH4_NODE_DTYPE and blocks.dtype == layout.TRIANGLE_BLOCK_DTYPE
+    np.testing.assert_array_equal(wide.packed.tables["triangles"], binary.packed.tables["triangles"])
+    n_tri, n_blocks = wide.packed.counts["triangles"], wide.packed.counts["triangle_blocks"]
+    lanes = blocks["index"][:n_blocks].ravel()
+    np.testing.assert_array_equal(np.sort(lanes[lanes >= 0]), np.arange(n_tri))
+    tri = wide.packed.tables["triangles"]
+    for k, axis in ((0, "x"), (1, "y"), (2, "z")):  # the lanes hold their triangle's vertices
+        for v in ("v0", "v1", "v2"):
+            got = blocks[f"{v}{axis}"][:n_blocks].ravel()
+            np.testing.assert_array_equal(got[lanes >= 0], tri[v][lanes[lanes >= 0], k])
+    count, child = nodes["count"], nodes["child"]
+    assert (child[count > 0] + (count[count > 0] + 3) // 4 <= n_blocks).all()
+    assert (child[count == 0] < wide.packed.counts["bvh_nodes"]).all()
+    with pytest.raises(ValueError, match="bvh_width"):
+        ScenePacker(bvh_width=8)
+
+
+def test_reference_refuses_wide_trees():
+    from backends.reference.backend import ReferenceBackend
+    from engine.errors import AberrantError
+
+    packer = ScenePacker("f64", camera_relative=False, bvh_width=4)
+    updates = packer.sync(small_scene())
+    assert packer.packed is not None
+    with pytest.raises(AberrantError, match="bvh_width=2"):
+        ReferenceBackend().upload(packer.packed, updates)

@@ -114,9 +114,10 @@ FAR_CASES = ["starter", "random-boxes"]
 # --- rendering ------------------------------------------------------------------------------------
 
 
-def render(backend, scene: Scene, size: tuple[int, int]) -> Frame:
-    """Pack for ``backend`` (camera-relative or not), upload everything, render every AOV."""
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+def render(backend, scene: Scene, size: tuple[int, int], bvh_width: int | None = None) -> Frame:
+    """Pack for ``backend`` (camera-relative or not; its BVH width unless given), upload, render every AOV."""
+    width = backend.bvh_width if bvh_width is None else bvh_width
+    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=width)
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -244,7 +245,9 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
     backend = backend_factory(backend_name, precision)
     reference = ReferenceBackend()
     scene = random_boxes(20, seed=9)
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     mover = scene.entity("box3")
     try:
         for step in range(4):
@@ -262,3 +265,26 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
     finally:
         scene.close()
         reference.release()
+
+
+@pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "random-boxes"])
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, precision, case):
+    """Binary and 4-wide trees (with their triangle blocks) give bit-identical frames, and so does testing
+    every triangle: the same per-triangle arithmetic and the same tie rule, whatever the visiting order."""
+    backend = backend_factory(backend_name, precision)
+    scene = CASES[case].build(assets)
+    saved = dict(backend.extra_defines)
+    try:
+        binary = render(backend, scene, CASES[case].size, bvh_width=2)
+        wide = render(backend, scene, CASES[case].size, bvh_width=4)
+        assert backend._bvh["BVH_WIDTH"] == 4
+        backend.extra_defines = {**saved, "BRUTE_FORCE": 1}
+        brute = render(backend, scene, CASES[case].size, bvh_width=4)
+    finally:
+        backend.extra_defines = saved
+        scene.close()
+    assert (binary.instance >= 0).mean() > 0.3
+    for name in AOVS:
+        np.testing.assert_array_equal(wide.aov(name), binary.aov(name), err_msg=name)
+        np.testing.assert_array_equal(brute.aov(name), binary.aov(name), err_msg=name)

@@ -27,7 +27,9 @@ from engine.settings import Settings
 def upload(scene: Scene) -> tuple[ReferenceBackend, ScenePacker]:
     """A fresh backend holding ``scene``, packed the way a driver would pack it."""
     backend = ReferenceBackend()
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -71,7 +73,9 @@ def test_backend_contract():
     scene = Scene()
     scene.add_mesh("box", "box")
     face_camera(scene, 5.0)
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     assert backend.upload(packer.packed, updates) == packer.packed.update_bytes(updates) > 0

@@ -10,6 +10,7 @@ import pytest
 
 from backends.base import AOVS, Backend, Frame
 from components import Camera, Transform
+from engine import layout
 from engine.app import App
 from engine.camera_view import CameraView
 from engine.errors import SceneError
@@ -443,6 +444,7 @@ def test_packer_follows_the_backend_configuration(make_scene):
     class Float64Backend(RecordingBackend):
         precisions = ("f64",)
         camera_relative = False
+        bvh_width = 4
 
     scene = make_scene(position=(100.0, 0.0, 0.0))
     scene.add_mesh("box", "box")
@@ -451,6 +453,7 @@ def test_packer_follows_the_backend_configuration(make_scene):
         assert app.packed is not None
         assert app.packed.precision == "f64"
         assert np.array_equal(app.packed.origin, (0.0, 0.0, 0.0))
+        assert app.packed.tables["bvh_nodes"].dtype == layout.BVH4_NODE_DTYPE
 
 
 def test_a_portal_whose_target_is_not_a_portal_is_a_clear_error(make_scene):

@@ -19,7 +19,9 @@ from engine.scene import Scene
 
 def upload(scene: Scene) -> ReferenceBackend:
     backend = ReferenceBackend()
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)

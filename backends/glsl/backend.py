@@ -143,7 +143,7 @@ class GlslBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._features = Features()
-        self._stack = shared.MIN_STACK
+        self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._uploaded = False
         with self._current():
             camera_bytes = layout.camera_dtype(self.precision).itemsize
@@ -253,7 +253,7 @@ class GlslBackend(Backend):
                     assert update.rows is not None
                     written += self._write_rows(update.table, table, update.rows)
                 if update.table == "bvh_nodes" and whole:
-                    self._stack = shared.stack_size(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+                    self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         self._features = packed.features
@@ -324,7 +324,7 @@ class GlslBackend(Backend):
             # counts on both sides of a shared edge); skipped on llvmpipe, where it costs about 5 %.
             EDGE_FALLBACK_FP64=int(not self.software),
             WORLD_FP64=1,
-            BVH_STACK_SIZE=self._stack,
+            **self._bvh,
             WORKGROUP_X=self.workgroup[0],
             WORKGROUP_Y=self.workgroup[1],
             CAMERA_BINDING=CAMERA_BINDING,
@@ -335,6 +335,7 @@ class GlslBackend(Backend):
         )
         for name in layout.TABLES:
             defines[f"{name.upper()}_STRIDE"] = layout.table_dtype(name, self.precision).itemsize // 16
+        defines["BVH_NODES_STRIDE"] = layout.BVH_WIDTHS[self._bvh["BVH_WIDTH"]].itemsize // 16
         for name, binding in OUTPUT_BINDINGS.items():
             defines[f"{name.upper()}_BINDING"] = binding
             defines[f"WRITE_{name.upper()}"] = int(name in aovs)

@@ -24,6 +24,7 @@ layout(rgba32ui, binding = 5) readonly restrict uniform uimage2D instances_img;
 layout(rgba32ui, binding = 6) readonly restrict uniform uimage2D materials_img;
 layout(rgba32ui, binding = 7) readonly restrict uniform uimage2D aberrations_img;
 layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
+layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D triangle_blocks_img;
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -71,6 +72,22 @@ TriangleUv fetch_triangle_uv_(int i)
     return t;
 }
 
+#if BVH_WIDTH == 4
+Bvh4Node fetch_bvh_node_(int i)
+{
+    int b = i * BVH_NODES_STRIDE;
+    Bvh4Node n;
+    n.lo_x = F4_AT_(bvh_nodes_img, b);
+    n.lo_y = F4_AT_(bvh_nodes_img, b + 1);
+    n.lo_z = F4_AT_(bvh_nodes_img, b + 2);
+    n.hi_x = F4_AT_(bvh_nodes_img, b + 3);
+    n.hi_y = F4_AT_(bvh_nodes_img, b + 4);
+    n.hi_z = F4_AT_(bvh_nodes_img, b + 5);
+    n.child = I4_AT_(bvh_nodes_img, b + 6);
+    n.count = I4_AT_(bvh_nodes_img, b + 7);
+    return n;
+}
+#else
 BvhNode fetch_bvh_node_(int i)
 {
     int b = i * BVH_NODES_STRIDE;
@@ -78,6 +95,24 @@ BvhNode fetch_bvh_node_(int i)
     n.lo = F4_AT_(bvh_nodes_img, b);
     n.hi = F4_AT_(bvh_nodes_img, b + 1);
     return n;
+}
+#endif
+
+TriangleBlock fetch_triangle_block_(int i)
+{
+    int b = i * TRIANGLE_BLOCKS_STRIDE;
+    TriangleBlock t;
+    t.v0x = F4_AT_(triangle_blocks_img, b);
+    t.v0y = F4_AT_(triangle_blocks_img, b + 1);
+    t.v0z = F4_AT_(triangle_blocks_img, b + 2);
+    t.v1x = F4_AT_(triangle_blocks_img, b + 3);
+    t.v1y = F4_AT_(triangle_blocks_img, b + 4);
+    t.v1z = F4_AT_(triangle_blocks_img, b + 5);
+    t.v2x = F4_AT_(triangle_blocks_img, b + 6);
+    t.v2y = F4_AT_(triangle_blocks_img, b + 7);
+    t.v2z = F4_AT_(triangle_blocks_img, b + 8);
+    t.index = I4_AT_(triangle_blocks_img, b + 9);
+    return t;
 }
 
 Material fetch_material_(int i)
@@ -155,6 +190,7 @@ Camera fetch_camera_()
 #define MATERIAL(i) (fetch_material_(i))
 #define ABERRATION(i) (fetch_aberration_(i))
 #define PORTAL(i) (fetch_portal_(i))
+#define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
 #define CAMERA_ROW (fetch_camera_())
 
 #else /* storage buffers */
@@ -162,11 +198,12 @@ Camera fetch_camera_()
 layout(std430, binding = 0) readonly restrict buffer SettingsTable { Settings settings_data[]; };
 layout(std430, binding = 1) readonly restrict buffer TriangleTable { Triangle triangles_data[]; };
 layout(std430, binding = 2) readonly restrict buffer TriangleUvTable { TriangleUv triangle_uvs_data[]; };
-layout(std430, binding = 3) readonly restrict buffer BvhNodeTable { BvhNode bvh_nodes_data[]; };
+layout(std430, binding = 3) readonly restrict buffer BvhNodeTable { BvhRow bvh_nodes_data[]; };
 layout(std430, binding = 4) readonly restrict buffer InstanceTable { Instance instances_data[]; };
 layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material materials_data[]; };
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
+layout(std430, binding = 8) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -178,6 +215,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define MATERIAL(i) (materials_data[(i)])
 #define ABERRATION(i) (aberrations_data[(i)])
 #define PORTAL(i) (portals_data[(i)])
+#define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 
 #endif

@@ -42,6 +42,7 @@
 #define F4(a, b, c, d) vec4(a, b, c, d)
 #define TO_REAL(x) real(x)
 #define TO_REAL3(v) real3(v)
+#define TO_REAL4(v) real4(v)
 #define TO_FLOAT(x) float(x)
 #define TO_FLOAT3(v) vec3(v)
 #define TO_INT(x) int(x)

@@ -194,6 +194,9 @@ class OpenClBackend(Backend):
     name: ClassVar[str] = "opencl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
     camera_relative: ClassVar[bool] = True
+    #: 4-wide nodes tested with float4 operations: PoCL runs each work-item as scalar code, so the
+    #: vector width is what a CPU core's SIMD gets (measured against binary: docs/performance.md).
+    bvh_width: ClassVar[int] = 4
 
     def __init__(
         self,
@@ -229,7 +232,7 @@ class OpenClBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._features = Features()
-        self._stack = shared.MIN_STACK
+        self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._uploaded = False
         mf = cl.mem_flags
         self._camera = cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
@@ -334,7 +337,7 @@ class OpenClBackend(Backend):
                 cl.enqueue_copy(self._queue, buffer, rows, dst_offset=update.rows.start * table.dtype.itemsize)
                 written += rows.nbytes
             if update.table == "bvh_nodes" and whole:
-                self._stack = shared.stack_size(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+                self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         self._features = packed.features
@@ -353,7 +356,7 @@ class OpenClBackend(Backend):
             # (PoCL 3.1, 800x800 ten boxes / 10k / 200k triangles): GPUs only, as the GLSL backend does.
             EDGE_FALLBACK_FP64=int(self.fp64 and not self.device.type & self._cl.device_type.CPU),
             WORLD_FP64=int(self.fp64),
-            BVH_STACK_SIZE=self._stack,
+            **self._bvh,
         )
         defines.update(self.extra_defines)
         return defines

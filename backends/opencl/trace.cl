@@ -10,11 +10,12 @@
 __kernel void trace(__global const Settings* settings,
                     __global const Triangle* triangles,
                     __global const TriangleUv* triangle_uvs,
-                    __global const BvhNode* bvh_nodes,
+                    __global const BvhRow* bvh_nodes,
                     __global const Instance* instances,
                     __global const Material* materials,
                     __global const Aberration* aberrations,
                     __global const Portal* portals,
+                    __global const TriangleBlock* triangle_blocks,
                     __global const Camera* camera,
                     __global uchar4* color_out,
                     __global float* depth_out,
@@ -37,6 +38,7 @@ __kernel void trace(__global const Settings* settings,
     sc.materials = materials;
     sc.aberrations = aberrations;
     sc.portals = portals;
+    sc.triangle_blocks = triangle_blocks;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {

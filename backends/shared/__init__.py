@@ -20,6 +20,8 @@ from importlib import resources
 
 import numpy as np
 
+from engine import layout
+
 #: Files of the shared core, in the order they are concatenated (the prelude goes before them).
 CORE_FILES: tuple[str, ...] = ("layout.h", "core.h")
 
@@ -63,6 +65,18 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
     nodes = nodes[:count]
     if count == 0:
         return 0
+    if layout.bvh_width(nodes) == 4:  # wide nodes only: their leaves live in their slots
+        child, kind = nodes["child"].astype(np.int64), nodes["count"]
+        is_child = np.zeros(count, bool)
+        kids = child[kind == 0]
+        is_child[kids[(kids >= 0) & (kids < count)]] = True
+        frontier = np.flatnonzero(~is_child)
+        depth = 0
+        while frontier.size and depth <= count:
+            depth += 1
+            frontier = child[frontier][kind[frontier] == 0]
+            frontier = frontier[(frontier >= 0) & (frontier < count)]
+        return depth
     first = nodes["first"].astype(np.int64)
     inner = nodes["count"] == 0
     is_child = np.zeros(count, bool)
@@ -79,6 +93,20 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
     return depth
 
 
+def stack_entries(nodes: np.ndarray, count: int) -> int:
+    """The most traversal-stack entries any tree of a node table can need.
+
+    A binary visit leaves at most one entry per level; a wide one pushes up to 4 and pops 1, leaving 3.
+    """
+    depth = bvh_depth(nodes, count)
+    return 3 * depth + 1 if count and layout.bvh_width(nodes[:count]) == 4 else depth
+
+
 def stack_size(nodes: np.ndarray, count: int) -> int:
-    """``BVH_STACK_SIZE`` for a node table: every tree's depth fits, rounded up so few variants exist."""
-    return max(MIN_STACK, -(-bvh_depth(nodes, count) // 16) * 16)
+    """``BVH_STACK_SIZE`` for a node table: every tree's stack fits, rounded up so few variants exist."""
+    return max(MIN_STACK, -(-stack_entries(nodes, count) // 16) * 16)
+
+
+def bvh_defines(nodes: np.ndarray, count: int) -> dict[str, int]:
+    """The defines a ``bvh_nodes`` table asks for: ``BVH_WIDTH`` (from its dtype) and ``BVH_STACK_SIZE``."""
+    return {"BVH_WIDTH": layout.bvh_width(nodes), "BVH_STACK_SIZE": stack_size(nodes, count)}

@@ -14,11 +14,12 @@ typedef struct SceneTables {
     __global const Settings* settings;
     __global const Triangle* triangles;
     __global const TriangleUv* triangle_uvs;
-    __global const BvhNode* bvh_nodes;
+    __global const BvhRow* bvh_nodes;
     __global const Instance* instances;
     __global const Material* materials;
     __global const Aberration* aberrations;
     __global const Portal* portals;
+    __global const TriangleBlock* triangle_blocks;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -33,3 +34,4 @@ typedef struct SceneTables {
 #define MATERIAL(i) (sc.materials[(i)])
 #define ABERRATION(i) (sc.aberrations[(i)])
 #define PORTAL(i) (sc.portals[(i)])
+#define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])

@@ -19,8 +19,9 @@
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
- *               BVH_NODE(i), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i)
- *               (records, from the bindings file)
+ *               BVH_NODE(i) (a BvhNode, or a Bvh4Node with BVH_WIDTH 4), INSTANCE(i),
+ *               MATERIAL(i), ABERRATION(i), PORTAL(i), TRIANGLE_BLOCK(i) (records, from
+ *               the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
@@ -34,6 +35,9 @@
  *                      (the packed origin can be 1e5 away while cells are 0.05)
  *   BRUTE_FORCE        test every triangle of an instance (benchmarks only)
  *   BVH_STACK_SIZE     traversal stack; the host checks every tree fits
+ *   BVH_WIDTH          2: binary nodes, one triangle at a time; 4: 4-wide nodes (child boxes SoA,
+ *                      slabbed with 4-vector ops) whose leaves are blocks of 4 triangles tested at
+ *                      once (layout.h; the packer's bvh_width, from the table's dtype)
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -318,7 +322,117 @@ FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k
     return best;
 }
 
+#if BVH_WIDTH == 4
+/* Keep lane hit (t, w0, w1, w2) of triangle k if it beats best: test_triangle's rule. */
+FORCE_INLINE MeshHit keep_nearer(MeshHit best, bool ok, real t, real u, real v, real w, int k, int row, real t_min)
+{
+    if (ok && t > t_min && (t < best.t || (t == best.t && row == best.instance && k < best.triangle))) {
+        best.t = t;
+        best.bary = R3(u, v, w);
+        best.instance = row;
+        best.triangle = k;
+    }
+    return best;
+}
+
+/* The x, y or z float4 of a block's vertex (axis i, per ray, once per block: not per lane). */
+#define BLOCK_AXIS(blk, V, i) TO_REAL4((i) == 0 ? blk.V##x : ((i) == 1 ? blk.V##y : blk.V##z))
+
+/* intersect_triangle on the four triangles of triangle_blocks row b at once: the same per-triangle
+ * arithmetic in 4-vectors (so the same watertight results, bit for bit), then test_triangle's rule
+ * lane by lane. Padding lanes (index -1) never hit. */
+FORCE_INLINE MeshHit test_block(SCENE_DECL MeshHit best, ShearedRay sr, int b, int row, bool cull, real t_min)
+{
+    TriangleBlock blk = TRIANGLE_BLOCK(b);
+#if EDGE_FALLBACK_FP64 && !REAL_IS_DOUBLE
+    /* Exact signs of zero edge functions are a per-lane branch: the scalar test keeps them exact. */
+    int4 index = blk.index;
+    for (int lane = 0; lane < 4; ++lane) {
+        int k = lane == 0 ? index.x : (lane == 1 ? index.y : (lane == 2 ? index.z : index.w));
+        if (k >= 0) {
+            best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+        }
+    }
+    return best;
+#else
+    real ox = VIDX3(sr.o, sr.kx);
+    real oy = VIDX3(sr.o, sr.ky);
+    real oz = VIDX3(sr.o, sr.kz);
+    real4 o_x = R4(ox, ox, ox, ox);
+    real4 o_y = R4(oy, oy, oy, oy);
+    real4 o_z = R4(oz, oz, oz, oz);
+    real4 s_x = R4(sr.s.x, sr.s.x, sr.s.x, sr.s.x);
+    real4 s_y = R4(sr.s.y, sr.s.y, sr.s.y, sr.s.y);
+    real4 s_z = R4(sr.s.z, sr.s.z, sr.s.z, sr.s.z);
+    real4 a_z = BLOCK_AXIS(blk, v0, sr.kz) - o_z;
+    real4 b_z = BLOCK_AXIS(blk, v1, sr.kz) - o_z;
+    real4 c_z = BLOCK_AXIS(blk, v2, sr.kz) - o_z;
+    PRECISE real4 ax = (BLOCK_AXIS(blk, v0, sr.kx) - o_x) - s_x * a_z;
+    PRECISE real4 ay = (BLOCK_AXIS(blk, v0, sr.ky) - o_y) - s_y * a_z;
+    PRECISE real4 bx = (BLOCK_AXIS(blk, v1, sr.kx) - o_x) - s_x * b_z;
+    PRECISE real4 by = (BLOCK_AXIS(blk, v1, sr.ky) - o_y) - s_y * b_z;
+    PRECISE real4 cx = (BLOCK_AXIS(blk, v2, sr.kx) - o_x) - s_x * c_z;
+    PRECISE real4 cy = (BLOCK_AXIS(blk, v2, sr.ky) - o_y) - s_y * c_z;
+    PRECISE real4 u = cx * by - cy * bx;
+    PRECISE real4 v = ax * cy - ay * cx;
+    PRECISE real4 w = bx * ay - by * ax;
+    real4 det = u + v + w;
+    real4 inv = R4(1.0f, 1.0f, 1.0f, 1.0f) / det;
+    real4 t = (u * (s_z * a_z) + v * (s_z * b_z) + w * (s_z * c_z)) * inv;
+    real4 uu = u * inv;
+    real4 vv = v * inv;
+    real4 ww = w * inv;
+    /* Per lane: front (or back without culling), det != 0, finite t and 1/det: intersect_triangle's tests. */
+#define BLOCK_LANE_OK(L)                                                                              \
+    (blk.index.L >= 0 &&                                                                              \
+     ((u.L >= REAL(0.0f) && v.L >= REAL(0.0f) && w.L >= REAL(0.0f)) ||                                \
+      (!cull && u.L <= REAL(0.0f) && v.L <= REAL(0.0f) && w.L <= REAL(0.0f))) &&                       \
+     det.L != REAL(0.0f) && ABS(t.L) < REAL_MAX && ABS(inv.L) < REAL_MAX)
+    best = keep_nearer(best, BLOCK_LANE_OK(x), t.x, uu.x, vv.x, ww.x, blk.index.x, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(y), t.y, uu.y, vv.y, ww.y, blk.index.y, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(z), t.z, uu.z, vv.z, ww.z, blk.index.z, row, t_min);
+    best = keep_nearer(best, BLOCK_LANE_OK(w), t.w, uu.w, vv.w, ww.w, blk.index.w, row, t_min);
+#undef BLOCK_LANE_OK
+    return best;
+#endif
+}
+#endif
+
 /* --- per-instance BVH traversal ------------------------------------------------------ */
+
+#if BVH_WIDTH == 4
+/* Push child lane L of a wide node if the ray crosses its box within (t_min, best.t] (slab_hit),
+ * keeping this node's pushes sorted with the nearest on top (an insertion step: at most 3 moves).
+ * A macro: the subset has no way to pass the stack arrays by reference. */
+#define BVH4_PUSH(L)                                                                                   \
+    if (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t && sp < BVH_STACK_SIZE) {     \
+        int j = sp;                                                                                    \
+        while (j > base && stack_t[j - 1] < tn.L) {                                                    \
+            stack_t[j] = stack_t[j - 1];                                                               \
+            stack_node[j] = stack_node[j - 1];                                                         \
+            stack_count[j] = stack_count[j - 1];                                                       \
+            j -= 1;                                                                                    \
+        }                                                                                              \
+        stack_t[j] = tn.L;                                                                             \
+        stack_node[j] = node.child.L;                                                                  \
+        stack_count[j] = node.count.L;                                                                 \
+        sp += 1;                                                                                       \
+    }
+/* Pop the next (child, count) still entered before the best hit into first/count; done if none. */
+#define BVH_POP()                                                                                      \
+    {                                                                                                  \
+        bool found = false;                                                                            \
+        while (sp > 0 && !found) {                                                                     \
+            sp -= 1;                                                                                   \
+            if (stack_t[sp] <= best.t) {                                                               \
+                first = stack_node[sp];                                                                \
+                count = stack_count[sp];                                                               \
+                found = true;                                                                          \
+            }                                                                                          \
+        }                                                                                              \
+        done = !found;                                                                                 \
+    }
+#endif
 
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
@@ -332,7 +446,34 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     bool cull = MATERIAL(inst.meta.y).flags.x != 0;
     ShearedRay sr = shear_ray(oo, dd);
     int root = inst.meta.x;
-#if BRUTE_FORCE
+#if BRUTE_FORCE && BVH_WIDTH == 4
+    /* As below, through the wide tree (slot 0 is never empty, the last used slot is the rightmost)
+     * and the leaves' blocks, whose index lanes name the triangles' rows. */
+    Bvh4Node left = BVH_NODE(root);
+    while (left.count.x == 0) {
+        left = BVH_NODE(left.child.x);
+    }
+    int end = 0;
+    int begin = TRIANGLE_BLOCK(left.child.x).index.x;
+    Bvh4Node right = BVH_NODE(root);
+    bool inner = true;
+    while (inner) {
+        int c = right.count.w >= 0 ? right.child.w
+                                   : (right.count.z >= 0 ? right.child.z : (right.count.y >= 0 ? right.child.y : right.child.x));
+        int n = right.count.w >= 0 ? right.count.w
+                                   : (right.count.z >= 0 ? right.count.z : (right.count.y >= 0 ? right.count.y : right.count.x));
+        inner = n == 0;
+        if (inner) {
+            right = BVH_NODE(c);
+        } else {
+            end = TRIANGLE_BLOCK(c).index.x + n; /* the leaf's blocks hold its n consecutive rows */
+        }
+    }
+    for (int k = begin; k < end; ++k) {
+        best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+    }
+    return best;
+#elif BRUTE_FORCE
     /* Every triangle (benchmarks: what the BVH saves). The asset's triangles are contiguous:
      * from its leftmost leaf's first to its rightmost leaf's end. */
     BvhNode left = BVH_NODE(root);
@@ -346,6 +487,53 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     int end = AS_INT(right.lo.w) + AS_INT(right.hi.w);
     for (int k = AS_INT(left.lo.w); k < end; ++k) {
         best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+    }
+    return best;
+#elif BVH_WIDTH == 4
+    /* The wide tree: one visit slabs the four children at once with 4-vector min/max (the slab()
+     * arithmetic lane by lane), pushes the children hit nearest-on-top and pops the nearest, so
+     * children are visited near to far. Stack entries are (child, count, entry t) as in the node. */
+    real3 inv = safe_inverse(dd);
+    real4 ox = R4(oo.x, oo.x, oo.x, oo.x);
+    real4 oy = R4(oo.y, oo.y, oo.y, oo.y);
+    real4 oz = R4(oo.z, oo.z, oo.z, oo.z);
+    real4 ix = R4(inv.x, inv.x, inv.x, inv.x);
+    real4 iy = R4(inv.y, inv.y, inv.y, inv.y);
+    real4 iz = R4(inv.z, inv.z, inv.z, inv.z);
+    real4 tiny = R4(REAL_TINY, REAL_TINY, REAL_TINY, REAL_TINY);
+    int stack_node[BVH_STACK_SIZE];
+    int stack_count[BVH_STACK_SIZE];
+    real stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    int first = root;
+    int count = 0;
+    bool done = false;
+    while (!done) {
+        while (count == 0 && !done) {
+            Bvh4Node node = BVH_NODE(first);
+            real4 tx0 = (TO_REAL4(node.lo_x) - ox) * ix;
+            real4 tx1 = (TO_REAL4(node.hi_x) - ox) * ix;
+            real4 ty0 = (TO_REAL4(node.lo_y) - oy) * iy;
+            real4 ty1 = (TO_REAL4(node.hi_y) - oy) * iy;
+            real4 tz0 = (TO_REAL4(node.lo_z) - oz) * iz;
+            real4 tz1 = (TO_REAL4(node.hi_z) - oz) * iz;
+            real4 tn = max(max(min(tx0, tx1), min(ty0, ty1)), min(tz0, tz1));
+            real4 tf = min(min(max(tx0, tx1), max(ty0, ty1)), max(tz0, tz1));
+            tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;
+            int base = sp;
+            BVH4_PUSH(x)
+            BVH4_PUSH(y)
+            BVH4_PUSH(z)
+            BVH4_PUSH(w)
+            BVH_POP()
+        }
+        if (!done) {
+            /* A leaf: its (count + 3) / 4 blocks of 4 triangles. */
+            for (int b = first; b < first + (count + 3) / 4; ++b) {
+                best = test_block(SCENE_PASS best, sr, b, row, cull, t_min);
+            }
+            BVH_POP()
+        }
     }
     return best;
 #else

@@ -41,6 +41,45 @@ STRUCT_BEGIN(BvhNode)
     float4 hi;
 STRUCT_END(BvhNode)
 
+/* bvh_nodes with BVH_WIDTH 4: a wide node, its four children's boxes SoA (lane i = child i).
+ * count[i] > 0: a leaf of count[i] triangles in (count[i] + 3) / 4 triangle_blocks rows from
+ * child[i]; count[i] == 0: the wide node child[i]; count[i] < 0: an empty slot. */
+STRUCT_BEGIN(Bvh4Node)
+    float4 lo_x;
+    float4 lo_y;
+    float4 lo_z;
+    float4 hi_x;
+    float4 hi_y;
+    float4 hi_z;
+    int4 child;
+    int4 count;
+STRUCT_END(Bvh4Node)
+
+/* The record of the bvh_nodes table: BVH_WIDTH (2 or 4) is the packer's bvh_width. */
+#ifndef BVH_WIDTH
+#define BVH_WIDTH 2
+#endif
+#if BVH_WIDTH == 4
+#define BvhRow Bvh4Node
+#else
+#define BvhRow BvhNode
+#endif
+
+/* triangle_blocks (BVH_WIDTH 4): four triangles of a leaf SoA, lane i = triangle i; index = their
+ * rows in triangles (-1: a padding lane). */
+STRUCT_BEGIN(TriangleBlock)
+    float4 v0x;
+    float4 v0y;
+    float4 v0z;
+    float4 v1x;
+    float4 v1y;
+    float4 v1z;
+    float4 v2x;
+    float4 v2y;
+    float4 v2z;
+    int4 index;
+STRUCT_END(TriangleBlock)
+
 /* materials: color = (r, g, b, checker cell size, 0 = none); flags.x = cull back faces. */
 STRUCT_BEGIN(Material)
     float4 color;

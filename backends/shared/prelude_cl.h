@@ -29,6 +29,7 @@ typedef double4 real4;
 /* A real literal written without a suffix: REAL_C(1.0e-9) is the double nearest 1e-9. */
 #define REAL_C(x) x
 #define TO_REAL3(v) convert_double3(v)
+#define TO_REAL4(v) convert_double4(v)
 #else
 typedef float real;
 typedef float2 real2;
@@ -38,6 +39,7 @@ typedef float4 real4;
 #define REAL_TINY 1.0e-30f
 #define REAL_C(x) x##f
 #define TO_REAL3(v) convert_float3(v)
+#define TO_REAL4(v) (v)
 #endif
 
 /* --- constructors and conversions ------------------------------------------------- */

@@ -138,6 +138,7 @@ class CellRunner:
                 precision=backend.precision,
                 camera_relative=backend.camera_relative,
                 bvh_params=BvhParams(max_leaf_size=setting.leaf),
+                bvh_width=backend.bvh_width,
             )
             start = time.perf_counter()
             updates = packer.sync(scene, camera.position)
@@ -206,7 +207,12 @@ class CellRunner:
         try:
             camera = scene_camera(baseline)
             params = BvhParams(max_leaf_size=setting.leaf)
-            packer = ScenePacker(precision=other.precision, camera_relative=other.camera_relative, bvh_params=params)
+            packer = ScenePacker(
+                precision=other.precision,
+                camera_relative=other.camera_relative,
+                bvh_params=params,
+                bvh_width=other.bvh_width,
+            )
             updates = packer.sync(baseline, camera.position)
             assert packer.packed is not None
             other.upload(packer.packed, updates)

@@ -88,7 +88,9 @@ def render_reference(scene: Scene, camera: CameraView, size: tuple[int, int]) ->
 
     start = time.perf_counter()
     with ReferenceBackend() as backend:
-        packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+        packer = ScenePacker(
+            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+        )
         updates = packer.sync(scene, camera.position)
         assert packer.packed is not None
         backend.upload(packer.packed, updates)
