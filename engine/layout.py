@@ -10,7 +10,7 @@ rules, so a drift between host and kernel is caught on the host.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``): always 32-bit. Vertices are
+  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``): always 32-bit. Vertices are
   float32 in the assets, so a float64 tracer loses nothing by reading them as
   float32; BVH bounds are rounded outward so any precision may traverse them.
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
@@ -83,6 +83,12 @@ BVH_NODE_DTYPE = np.dtype(
         "itemsize": 32,
     }
 )
+
+#: A node of the top-level tree over instances (``engine.tlas``), the BVH node's 32 bytes:
+#: ``count == 1``: a leaf over instance row ``first``; ``count == 0``: an interior node whose
+#: children are ``first`` and ``first + 1``. Bounds are float32 rounded outward, a leaf's the
+#: instance's world bounds grown by a margin (the exact ones are on the instance row).
+TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
@@ -204,6 +210,7 @@ TABLES: tuple[str, ...] = (
     "materials",
     "aberrations",
     "portals",
+    "tlas_nodes",
 )
 
 
@@ -215,6 +222,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "triangle_uvs": TRIANGLE_UV_DTYPE,
         "bvh_nodes": BVH_NODE_DTYPE,
         "materials": MATERIAL_DTYPE,
+        "tlas_nodes": TLAS_NODE_DTYPE,
     }
     if name in fixed:
         return fixed[name]

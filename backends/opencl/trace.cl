@@ -15,6 +15,7 @@ __kernel void trace(__global const Settings* settings,
                     __global const Material* materials,
                     __global const Aberration* aberrations,
                     __global const Portal* portals,
+                    __global const TlasNode* tlas_nodes,
                     __global const Camera* camera,
                     __global uchar4* color_out,
                     __global float* depth_out,
@@ -37,6 +38,7 @@ __kernel void trace(__global const Settings* settings,
     sc.materials = materials;
     sc.aberrations = aberrations;
     sc.portals = portals;
+    sc.tlas_nodes = tlas_nodes;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {

@@ -82,3 +82,13 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
 def stack_size(nodes: np.ndarray, count: int) -> int:
     """``BVH_STACK_SIZE`` for a node table: every tree's depth fits, rounded up so few variants exist."""
     return max(MIN_STACK, -(-bvh_depth(nodes, count) // 16) * 16)
+
+
+#: The smallest top-level (instance) traversal stack compiled; deeper trees get more, in steps of 8.
+MIN_TLAS_STACK = 16
+
+
+def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
+    """``TLAS_STACK_SIZE`` for a ``tlas_nodes`` table: its depth fits (a SAH/median tree: about log2 of the
+    instances), rounded up so few variants exist."""
+    return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)

@@ -19,6 +19,7 @@ typedef struct SceneTables {
     __global const Material* materials;
     __global const Aberration* aberrations;
     __global const Portal* portals;
+    __global const TlasNode* tlas_nodes;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -33,3 +34,4 @@ typedef struct SceneTables {
 #define MATERIAL(i) (sc.materials[(i)])
 #define ABERRATION(i) (sc.aberrations[(i)])
 #define PORTAL(i) (sc.portals[(i)])
+#define TLAS_NODE(i) (sc.tlas_nodes[(i)])

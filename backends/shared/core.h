@@ -19,8 +19,8 @@
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
- *               BVH_NODE(i), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i)
- *               (records, from the bindings file)
+ *               BVH_NODE(i), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i),
+ *               TLAS_NODE(i) (records, from the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
@@ -34,6 +34,8 @@
  *                      (the packed origin can be 1e5 away while cells are 0.05)
  *   BRUTE_FORCE        test every triangle of an instance (benchmarks only)
  *   BVH_STACK_SIZE     traversal stack; the host checks every tree fits
+ *   USE_TLAS           find instances through the top-level tree (tlas_nodes), not a loop over all
+ *   TLAS_STACK_SIZE    its traversal stack; the host sizes it to the tree's depth
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -65,6 +67,12 @@
 #endif
 #ifndef BVH_STACK_SIZE
 #define BVH_STACK_SIZE 64
+#endif
+#ifndef USE_TLAS
+#define USE_TLAS 1
+#endif
+#ifndef TLAS_STACK_SIZE
+#define TLAS_STACK_SIZE 32
 #endif
 
 #ifndef HAS_METRIC
@@ -309,7 +317,8 @@ FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k
 {
     Triangle tri = TRIANGLE(k);
     real4 h = intersect_triangle(sr, TO_REAL3(tri.v0.xyz), TO_REAL3(tri.v1.xyz), TO_REAL3(tri.v2.xyz), cull);
-    if (h.x > t_min && (h.x < best.t || (h.x == best.t && row == best.instance && k < best.triangle))) {
+    bool tie_wins = row < best.instance || (row == best.instance && k < best.triangle);
+    if (h.x > t_min && (h.x < best.t || (h.x == best.t && best.instance >= 0 && tie_wins))) {
         best.t = h.x;
         best.bary = R3(h.y, h.z, h.w);
         best.instance = row;
@@ -416,7 +425,11 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #endif
 }
 
-/* The nearest triangle hit with t_min < t <= t_max over every instance, culled by world bounds. */
+/* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
+ * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py), nearest child first;
+ * each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
+ * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
+ * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
 FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
 {
     MeshHit best;
@@ -424,17 +437,64 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     best.bary = R3S(0.0f);
     best.instance = -1;
     best.triangle = -1;
-    if (!(dot(d, d) > REAL(0.0f))) {
+    int count = SETTINGS.counts.x;
+    if (!(dot(d, d) > REAL(0.0f)) || count == 0) {
         return best; /* a zero or NaN direction hits nothing */
     }
     real3 inv = safe_inverse(d);
-    int count = SETTINGS.counts.x;
+#if USE_TLAS
+    int stack_node[TLAS_STACK_SIZE];
+    real stack_t[TLAS_STACK_SIZE];
+    int sp = 0;
+    TlasNode node = TLAS_NODE(0);
+    bool more = slab_hit(slab(o, inv, TO_REAL3(node.lo.xyz), TO_REAL3(node.hi.xyz)), t_min, best.t);
+    while (more) {
+        int first = AS_INT(node.lo.w);
+        bool pop = true;
+        if (AS_INT(node.hi.w) == 0) {
+            TlasNode c0 = TLAS_NODE(first);
+            TlasNode c1 = TLAS_NODE(first + 1);
+            real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
+            real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));
+            bool hit0 = slab_hit(h0, t_min, best.t);
+            bool hit1 = slab_hit(h1, t_min, best.t);
+            if (hit0 || hit1) {
+                /* The nearer child now, the other on the stack (the host sizes it to the tree's depth). */
+                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
+                if (hit0 && hit1 && sp < TLAS_STACK_SIZE) {
+                    stack_node[sp] = second_first ? first : first + 1;
+                    stack_t[sp] = second_first ? h0.x : h1.x;
+                    sp += 1;
+                }
+                node = second_first ? c1 : c0;
+                pop = false;
+            }
+        } else {
+            real2 h = slab(o, inv, INSTANCE(first).bounds_min.xyz, INSTANCE(first).bounds_max.xyz);
+            if (slab_hit(h, t_min, best.t)) {
+                best = trace_instance(SCENE_PASS best, first, o, d, t_min);
+            }
+        }
+        if (pop) {
+            /* The next node still entered before the best hit, or done. */
+            more = false;
+            while (sp > 0 && !more) {
+                sp -= 1;
+                if (stack_t[sp] <= best.t) {
+                    node = TLAS_NODE(stack_node[sp]);
+                    more = true;
+                }
+            }
+        }
+    }
+#else
     for (int i = 0; i < count; ++i) {
         real2 h = slab(o, inv, INSTANCE(i).bounds_min.xyz, INSTANCE(i).bounds_max.xyz);
         if (slab_hit(h, t_min, best.t)) {
             best = trace_instance(SCENE_PASS best, i, o, d, t_min);
         }
     }
+#endif
     return best;
 }
 
