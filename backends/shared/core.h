@@ -138,6 +138,8 @@
 STRUCT_BEGIN(Ray)
     real3 o;          /* origin of the leg */
     real3 r;          /* world direction */
+    real o_len;       /* |o| and |r|, computed once per leg (t_min, tie windows, nudges, lengths) */
+    real r_len;
     real3 w;          /* perceived direction (unit) */
     real3 d0;         /* primary direction, carried through portals (the "restore" exit rule) */
     real L;           /* path length at o: world units travelled */
@@ -448,10 +450,11 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     int sp = 0;
     TlasNode node = TLAS_NODE(0);
     bool more = slab_hit(slab(o, inv, TO_REAL3(node.lo.xyz), TO_REAL3(node.hi.xyz)), t_min, best.t);
+    /* While-while, as trace_instance: descend to a leaf, then trace its instance outside the descent
+     * loop, so SIMD lanes (llvmpipe) run the large instance code once per leaf, not per node. */
     while (more) {
-        int first = AS_INT(node.lo.w);
-        bool pop = true;
-        if (AS_INT(node.hi.w) == 0) {
+        while (AS_INT(node.hi.w) == 0 && more) {
+            int first = AS_INT(node.lo.w);
             TlasNode c0 = TLAS_NODE(first);
             TlasNode c1 = TLAS_NODE(first + 1);
             real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
@@ -467,16 +470,25 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
                     sp += 1;
                 }
                 node = second_first ? c1 : c0;
-                pop = false;
-            }
-        } else {
-            real2 h = slab(o, inv, INSTANCE(first).bounds_min.xyz, INSTANCE(first).bounds_max.xyz);
-            if (slab_hit(h, t_min, best.t)) {
-                best = trace_instance(SCENE_PASS best, first, o, d, t_min);
+            } else {
+                more = false;
+                while (sp > 0 && !more) {
+                    sp -= 1;
+                    if (stack_t[sp] <= best.t) {
+                        node = TLAS_NODE(stack_node[sp]);
+                        more = true;
+                    }
+                }
             }
         }
-        if (pop) {
-            /* The next node still entered before the best hit, or done. */
+        if (more) {
+            /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node
+             * still entered before the best hit, or done. */
+            int row = AS_INT(node.lo.w);
+            real2 h = slab(o, inv, INSTANCE(row).bounds_min.xyz, INSTANCE(row).bounds_max.xyz);
+            if (slab_hit(h, t_min, best.t)) {
+                best = trace_instance(SCENE_PASS best, row, o, d, t_min);
+            }
             more = false;
             while (sp > 0 && !more) {
                 sp -= 1;
@@ -589,10 +601,10 @@ bool same_direction(real3 a, real3 b)
     return a.x == b.x && a.y == b.y && a.z == b.z;
 }
 
-/* Candidates within this of the nearest (at t from o) are tied: |o| + t bounds the event point's size. */
-real tie_window(real3 o, real t)
+/* Candidates within this of the nearest (at t from o, o_len = |o|) are tied: |o| + t bounds the event point's size. */
+real tie_window(real o_len, real t)
 {
-    return TIE_RELATIVE * max(REAL(1.0f), length(o) + t);
+    return TIE_RELATIVE * max(REAL(1.0f), o_len + t);
 }
 #endif
 
@@ -690,9 +702,9 @@ int containing_box(SCENE_DECL real3 p)
 }
 
 /* The active box just past the point o + t r (NUDGE_RELATIVE of its size further along r). */
-int box_after(SCENE_DECL real3 o, real3 r, real t)
+int box_after(SCENE_DECL real3 o, real3 r, real o_len, real t)
 {
-    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), length(o) + t);
+    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t);
     return containing_box(SCENE_PASS o + (t + nudge) * r);
 }
 
@@ -709,33 +721,21 @@ real3 metric_local(Aberration box, real3 w)
     return (R3S(1.0f) + box.deformation.xyz) * axes;
 }
 
-/* r = normalize(R (s (.) R^T w)) (aberrations.world_direction); previous if degenerate. A box with
- * D = 0 leaves the unit w as it is (renormalising would only add rounding). */
-real3 metric_direction(Aberration box, real3 w, real3 previous)
+/* r = normalize(R scaled) (aberrations.world_direction), scaled = metric_local(box, w); previous if
+ * degenerate. (The caller skips a box with D = 0: it leaves the unit w as it is.) */
+real3 metric_direction(Aberration box, real3 scaled, real3 previous)
 {
-    if (zero_deformation(box)) {
-        return w;
-    }
-    real3 scaled = metric_local(box, w);
     real3 world = R3(dot(box.rot0.xyz, scaled), dot(box.rot1.xyz, scaled), dot(box.rot2.xyz, scaled));
     return normalize_or_keep(world, previous);
 }
 #endif
 
-/* Perceived length per world length (aberrations.perceived_per_world): 1 / |s (.) R^T w| in a metric
- * box (0 where the norm overflows), 1 elsewhere and in a box with D = 0. */
-real perceived_rate(SCENE_DECL int row, real3 w)
+/* Perceived length per world length in a metric box (aberrations.perceived_per_world): 1 / |scaled|,
+ * scaled = metric_local(box, w) (0 where the norm overflows); 1 elsewhere and in a box with D = 0. */
+real perceived_rate(real3 scaled)
 {
-#if HAS_METRIC
-    if (row >= 0) {
-        Aberration box = ABERRATION(row);
-        if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
-            real norm = length(metric_local(box, w));
-            return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
-        }
-    }
-#endif
-    return REAL(1.0f);
+    real norm = length(scaled);
+    return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
 }
 
 #if HAS_BENDING
@@ -803,15 +803,18 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
     Turn turn;
     turn.w = w;
     turn.r = w;
+    turn.f = REAL(1.0f);
 #if HAS_METRIC
     if (next >= 0) {
+        /* s (.) R^T w once, for both the direction and the rate. */
         Aberration box = ABERRATION(next);
-        if (box.meta.x == MODE_METRIC) {
-            turn.r = metric_direction(box, w, r);
+        if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
+            real3 scaled = metric_local(box, w);
+            turn.r = metric_direction(box, scaled, r);
+            turn.f = perceived_rate(scaled);
         }
     }
 #endif
-    turn.f = perceived_rate(SCENE_PASS next, turn.w);
     return turn;
 }
 #endif
@@ -855,14 +858,15 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
  * a new leg starts on the target quad, which the ray is then leaving. The active box is the caller's. */
 FORCE_INLINE Ray teleport(SCENE_DECL Ray ray, int row, real t)
 {
-    real len_r = length(ray.r);
-    ray.L = ray.L + t * len_r;
-    ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
+    ray.L = ray.L + t * ray.r_len;
+    ray.Lambda = ray.Lambda + (t - ray.t_piece) * ray.r_len * ray.f;
     Portal portal = PORTAL(row);
     ray.o = affine_point(portal.transfer0, portal.transfer1, portal.transfer2, ray.o + t * ray.r);
     ray.r = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.r), ray.r);
     ray.w = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.w), ray.w);
     ray.d0 = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.d0), ray.d0);
+    ray.o_len = length(ray.o);
+    ray.r_len = length(ray.r);
     ray.t_from = REAL(0.0f);
     ray.t_piece = REAL(0.0f);
     ray.leaving_kind = EVENT_PORTAL;
@@ -886,6 +890,8 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
     Ray ray;
     ray.o = cam.position.xyz;
     ray.r = d;
+    ray.o_len = length(ray.o);
+    ray.r_len = length(d);
     ray.w = d;
     ray.d0 = d;
     ray.L = REAL(0.0f);
@@ -906,9 +912,9 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
  * the direction changed. Lambda is closed off where the perceived rate changes. */
 FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
 {
-    int next = box_after(SCENE_PASS ray.o, ray.r, t);
+    int next = box_after(SCENE_PASS ray.o, ray.r, ray.o_len, t);
     Turn turn = transition(SCENE_PASS ray.aberration, next, ray.w, ray.r, ray.d0, lo, hi);
-    real len_r = length(ray.r);
+    real len_r = ray.r_len;
     if (same_direction(turn.r, ray.r)) {
         if (turn.f != ray.f) {
             ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
@@ -920,6 +926,8 @@ FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
         ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
         ray.o = ray.o + t * ray.r;
         ray.r = turn.r;
+        ray.o_len = length(ray.o);
+        ray.r_len = length(ray.r);
         ray.t_from = REAL(0.0f);
         ray.t_piece = REAL(0.0f);
     }
@@ -945,6 +953,11 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     real3 sigma_hi = cam.sigma_max.xyz;
     ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
 #endif
+    MeshHit hit;
+    hit.t = REAL_MAX;
+    hit.bary = R3S(0.0f);
+    hit.instance = -1;
+    hit.triangle = -1;
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
     /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
@@ -954,7 +967,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         }
         /* 1. The nearest of: a linked portal quad, a box face, a mesh triangle, past the point the ray
          * leaves (t_from along the leg) by t_min, skipping the surface it leaves. */
-        real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), length(ray.o) + ray.t_from);
+        real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
         real t_cut = REAL_MAX;
 #if HAS_PORTALS
         Event portal = nearest_portal(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
@@ -963,7 +976,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #if HAS_ABERRATIONS
         Event face = nearest_box_face(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
         if (face.t < REAL_MAX) {
-            t_cut = min(t_cut, face.t + tie_window(ray.o, face.t));
+            t_cut = min(t_cut, face.t + tie_window(ray.o_len, face.t));
         }
 #endif
         /* The mesh search stops where a mesh can no longer win. */
@@ -979,7 +992,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         nearest = min(nearest, face.t);
 #endif
         if (nearest < REAL_MAX) {
-            real limit = nearest + tie_window(ray.o, nearest);
+            real limit = nearest + tie_window(ray.o_len, nearest);
 #if HAS_ABERRATIONS
             if (face.t <= limit) {
                 kind = EVENT_ABERRATION;
@@ -1000,12 +1013,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             break;
         }
         if (kind == EVENT_MESH) {
-            real len_r = length(ray.r);
-            real3 position = ray.o + mesh.t * ray.r;
-            px.color = quantize_rgba(shade(SCENE_PASS cam, mesh, ray.r, position));
-            px.depth = TO_FLOAT(ray.L + mesh.t * len_r);
-            px.perceived = TO_FLOAT(ray.Lambda + (mesh.t - ray.t_piece) * len_r * ray.f);
-            px.instance = INSTANCE(mesh.instance).meta.z;
+            hit = mesh; /* shaded after the loop */
             break;
         }
         ray.n += 1;
@@ -1026,6 +1034,16 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             ray.leaving = face.row;
         }
 #endif
+    }
+    /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
+     * code masked on every pass. */
+    if (hit.instance >= 0) {
+        real len_r = ray.r_len;
+        real3 position = ray.o + hit.t * ray.r;
+        px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
+        px.depth = TO_FLOAT(ray.L + hit.t * len_r);
+        px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
+        px.instance = INSTANCE(hit.instance).meta.z;
     }
     px.events = ray.n;
     return px;
