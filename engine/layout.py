@@ -10,8 +10,8 @@ rules, so a drift between host and kernel is caught on the host.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``, ``triangle_blocks``): always
-  32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
+  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``):
+  always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
   may traverse them. ``bvh_nodes`` has one of two dtypes, chosen by the
   packer's ``bvh_width`` (the backend's): binary :data:`BVH_NODE_DTYPE`, or
@@ -130,6 +130,12 @@ def bvh_width(nodes: np.ndarray) -> int:
             return width
     raise ValueError(f"not a BVH node table: dtype {nodes.dtype}")
 
+
+#: A node of the top-level tree over instances (``engine.tlas``), the BVH node's 32 bytes:
+#: ``count == 1``: a leaf over instance row ``first``; ``count == 0``: an interior node whose
+#: children are ``first`` and ``first + 1``. Bounds are float32 rounded outward, a leaf's the
+#: instance's world bounds grown by a margin (the exact ones are on the instance row).
+TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
@@ -251,6 +257,7 @@ TABLES: tuple[str, ...] = (
     "materials",
     "aberrations",
     "portals",
+    "tlas_nodes",
     "triangle_blocks",
 )
 
@@ -263,6 +270,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "triangle_uvs": TRIANGLE_UV_DTYPE,
         "bvh_nodes": BVH_NODE_DTYPE,
         "materials": MATERIAL_DTYPE,
+        "tlas_nodes": TLAS_NODE_DTYPE,
         "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
     }
     if name in fixed:

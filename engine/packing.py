@@ -27,6 +27,7 @@ from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
 from engine.scene import SETTINGS, Scene
+from engine.tlas import FAT_MARGIN, InstanceTlas
 
 
 @dataclass(frozen=True)
@@ -162,6 +163,7 @@ class ScenePacker:
         origin_cell: float = 16.0,
         bvh_params: BvhParams | None = None,
         bvh_width: int = 2,
+        tlas_margin: float = FAT_MARGIN,
     ) -> None:
         if bvh_width not in layout.BVH_WIDTHS:
             raise ValueError(f"bvh_width must be one of {sorted(layout.BVH_WIDTHS)}, got {bvh_width!r}")
@@ -176,6 +178,9 @@ class ScenePacker:
         self._scene_world: str | None = None
         self._instance_row: dict[int, int] = {}
         self._asset_roots: dict[str, int] = {}
+        self.tlas_margin = tlas_margin
+        #: The top-level tree over the instance rows (``tlas_nodes``), kept in step with them.
+        self.tlas = InstanceTlas.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
 
     # origin ---------------------------------------------------------------------------
 
@@ -205,9 +210,12 @@ class ScenePacker:
         updates: list[TableUpdate] = []
         origin = self._choose_origin(camera_position, packed.origin)
         if not np.array_equal(origin, packed.origin):
+            delta = origin - packed.origin
             packed.origin = origin
             self._pack_instances(scene)
-            updates.append(TableUpdate("instances"))
+            self.tlas.translate(delta, *self._instance_bounds())
+            self._store_tlas()
+            updates += [TableUpdate("instances"), TableUpdate("tlas_nodes")]
             changes = [c for c in changes if c.kind not in ("transform",)]
             changed_real = {"aberrations", "portals"}
         else:
@@ -232,6 +240,8 @@ class ScenePacker:
         for row in sorted(instance_rows):
             self._pack_instance_rows(scene, [row])
             updates.append(TableUpdate("instances", range(row, row + 1)))
+        if instance_rows:
+            updates += self._update_tlas(sorted(instance_rows))
         for row in sorted(material_rows):
             self._pack_material_row(scene, row)
             updates.append(TableUpdate("materials", range(row, row + 1)))
@@ -315,6 +325,8 @@ class ScenePacker:
             versions={name: old_versions.get(name, 0) + 1 for name in layout.TABLES},
         )  # fmt: skip
         self._pack_instances(scene)
+        self.tlas = InstanceTlas.build(*self._instance_bounds(), self.tlas_margin)
+        self._store_tlas()
         self._pack_materials(scene)
         self._pack_aberrations(scene)
         self._pack_portals(scene)
@@ -379,6 +391,27 @@ class ScenePacker:
                 entity,
                 self._asset_flags[asset.content_hash],
             )
+
+    def _instance_bounds(self, rows: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Exact world bounds of instance rows (all live rows by default) as float64 (n, 3)."""
+        assert self.packed is not None
+        table = self.packed.tables["instances"]
+        index = slice(0, self.packed.counts["instances"]) if rows is None else rows
+        return table["bounds_min"][index, :3].astype(np.float64), table["bounds_max"][index, :3].astype(np.float64)
+
+    def _store_tlas(self) -> None:
+        assert self.packed is not None
+        self.packed.tables["tlas_nodes"] = self.tlas.nodes
+        self.packed.counts["tlas_nodes"] = self.tlas.count
+
+    def _update_tlas(self, rows: list[int]) -> list[TableUpdate]:
+        """The tree after instance ``rows`` moved: nothing while they stay in their fat boxes, else the
+        refitted node rows, or the whole table when it was rebuilt."""
+        changed = self.tlas.update(rows, *self._instance_bounds(rows))
+        self._store_tlas()
+        if changed is None:
+            return [TableUpdate("tlas_nodes")]
+        return [TableUpdate("tlas_nodes", range(n, n + 1)) for n in changed]
 
     def _pack_materials(self, scene: Scene) -> None:
         assert self.packed is not None

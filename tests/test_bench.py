@@ -191,6 +191,8 @@ def test_quick_run_writes_a_complete_report(quick_run):
     for section in ("## Issue 10 targets", "## Headline", "## Engine overhead", "## Embree anchor", "## What was"):
         assert section in report
     assert len(results["overhead"]) == len(backends)
+    # The mover stays within its fat TLAS leaf: no tick re-uploads tree rows.
+    assert all(e["tlas_upload_ticks"] == 0 for e in results["overhead"] if "median_ms" in e)
 
 
 @pytest.mark.slow

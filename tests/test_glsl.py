@@ -360,7 +360,7 @@ def test_row_range_upload_writes_only_those_rows(fresh_glsl):
     buffer = fresh_glsl._tables["instances"]
     entity = scene.entity("b")
     t = scene.get(entity, Transform)
-    scene.set(entity, replace(t, position=(0.25, 0.5, -1.5)))
+    scene.set(entity, replace(t, position=(0.05, 0.5, -1.05)))  # within its fat TLAS leaf: one row
     updates = packer.sync(scene)
     row = int(np.flatnonzero(packed.instance_entities == entity)[0])
     assert [(u.table, u.rows) for u in updates] == [("instances", range(row, row + 1))]

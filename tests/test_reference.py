@@ -19,6 +19,7 @@ from backends.reference.traverse import Geometry, nearest_mesh_hits
 from components import Transform
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
+from engine.layout import TLAS_NODE_DTYPE
 from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
@@ -94,7 +95,10 @@ def test_incremental_upload_moves_the_entity():
     updates = packer.sync(scene)
     assert packer.packed is not None
     row_bytes = packer.packed.tables["instances"].dtype.itemsize
-    assert backend.upload(packer.packed, updates) == row_bytes
+    # A move of its whole size leaves its fat leaf in the top-level tree: that tree row goes up too.
+    assert {u.table for u in updates} == {"instances", "tlas_nodes"} and all(u.rows is not None for u in updates)
+    tree_rows = sum(len(u.rows) for u in updates if u.table == "tlas_nodes" and u.rows is not None)
+    assert backend.upload(packer.packed, updates) == row_bytes + tree_rows * TLAS_NODE_DTYPE.itemsize
     after = backend.render(camera, 32, 32, aovs=("instance",)).instance
     fresh, _ = upload(scene)
     assert np.array_equal(after, fresh.render(camera, 32, 32, aovs=("instance",)).instance)

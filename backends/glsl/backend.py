@@ -144,6 +144,7 @@ class GlslBackend(Backend):
         self._origin = np.zeros(3)
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
+        self._tlas_stack = shared.MIN_TLAS_STACK
         self._uploaded = False
         with self._current():
             camera_bytes = layout.camera_dtype(self.precision).itemsize
@@ -254,6 +255,10 @@ class GlslBackend(Backend):
                     written += self._write_rows(update.table, table, update.rows)
                 if update.table == "bvh_nodes" and whole:
                     self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+                if update.table == "tlas_nodes" and whole:
+                    self._tlas_stack = shared.tlas_stack_size(
+                        packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0)
+                    )
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         self._features = packed.features
@@ -325,6 +330,7 @@ class GlslBackend(Backend):
             EDGE_FALLBACK_FP64=int(not self.software),
             WORLD_FP64=1,
             **self._bvh,
+            TLAS_STACK_SIZE=self._tlas_stack,
             WORKGROUP_X=self.workgroup[0],
             WORKGROUP_Y=self.workgroup[1],
             CAMERA_BINDING=CAMERA_BINDING,

@@ -24,7 +24,8 @@ layout(rgba32ui, binding = 5) readonly restrict uniform uimage2D instances_img;
 layout(rgba32ui, binding = 6) readonly restrict uniform uimage2D materials_img;
 layout(rgba32ui, binding = 7) readonly restrict uniform uimage2D aberrations_img;
 layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
-layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D triangle_blocks_img;
+layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D tlas_nodes_img;
+layout(rgba32ui, binding = 10) readonly restrict uniform uimage2D triangle_blocks_img;
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -166,6 +167,15 @@ Portal fetch_portal_(int i)
     return r;
 }
 
+TlasNode fetch_tlas_node_(int i)
+{
+    int b = i * TLAS_NODES_STRIDE;
+    TlasNode n;
+    n.lo = F4_AT_(tlas_nodes_img, b);
+    n.hi = F4_AT_(tlas_nodes_img, b + 1);
+    return n;
+}
+
 Camera fetch_camera_()
 {
     Camera c;
@@ -190,6 +200,7 @@ Camera fetch_camera_()
 #define MATERIAL(i) (fetch_material_(i))
 #define ABERRATION(i) (fetch_aberration_(i))
 #define PORTAL(i) (fetch_portal_(i))
+#define TLAS_NODE(i) (fetch_tlas_node_(i))
 #define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
 #define CAMERA_ROW (fetch_camera_())
 
@@ -203,7 +214,8 @@ layout(std430, binding = 4) readonly restrict buffer InstanceTable { Instance in
 layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material materials_data[]; };
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
-layout(std430, binding = 8) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
+layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
+layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -215,6 +227,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define MATERIAL(i) (materials_data[(i)])
 #define ABERRATION(i) (aberrations_data[(i)])
 #define PORTAL(i) (portals_data[(i)])
+#define TLAS_NODE(i) (tlas_nodes_data[(i)])
 #define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 

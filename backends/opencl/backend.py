@@ -233,6 +233,7 @@ class OpenClBackend(Backend):
         self._origin = np.zeros(3)
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
+        self._tlas_stack = shared.MIN_TLAS_STACK
         self._uploaded = False
         mf = cl.mem_flags
         self._camera = cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
@@ -338,6 +339,10 @@ class OpenClBackend(Backend):
                 written += rows.nbytes
             if update.table == "bvh_nodes" and whole:
                 self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+            if update.table == "tlas_nodes" and whole:
+                self._tlas_stack = shared.tlas_stack_size(
+                    packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0)
+                )
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         self._features = packed.features
@@ -357,6 +362,7 @@ class OpenClBackend(Backend):
             EDGE_FALLBACK_FP64=int(self.fp64 and not self.device.type & self._cl.device_type.CPU),
             WORLD_FP64=int(self.fp64),
             **self._bvh,
+            TLAS_STACK_SIZE=self._tlas_stack,
         )
         defines.update(self.extra_defines)
         return defines

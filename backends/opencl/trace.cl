@@ -15,6 +15,7 @@ __kernel void trace(__global const Settings* settings,
                     __global const Material* materials,
                     __global const Aberration* aberrations,
                     __global const Portal* portals,
+                    __global const TlasNode* tlas_nodes,
                     __global const TriangleBlock* triangle_blocks,
                     __global const Camera* camera,
                     __global uchar4* color_out,
@@ -38,6 +39,7 @@ __kernel void trace(__global const Settings* settings,
     sc.materials = materials;
     sc.aberrations = aberrations;
     sc.portals = portals;
+    sc.tlas_nodes = tlas_nodes;
     sc.triangle_blocks = triangle_blocks;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;

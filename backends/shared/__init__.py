@@ -110,3 +110,13 @@ def stack_size(nodes: np.ndarray, count: int) -> int:
 def bvh_defines(nodes: np.ndarray, count: int) -> dict[str, int]:
     """The defines a ``bvh_nodes`` table asks for: ``BVH_WIDTH`` (from its dtype) and ``BVH_STACK_SIZE``."""
     return {"BVH_WIDTH": layout.bvh_width(nodes), "BVH_STACK_SIZE": stack_size(nodes, count)}
+
+
+#: The smallest top-level (instance) traversal stack compiled; deeper trees get more, in steps of 8.
+MIN_TLAS_STACK = 16
+
+
+def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
+    """``TLAS_STACK_SIZE`` for a ``tlas_nodes`` table: its depth fits (a SAH/median tree: about log2 of the
+    instances), rounded up so few variants exist."""
+    return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)

@@ -19,6 +19,7 @@ typedef struct SceneTables {
     __global const Material* materials;
     __global const Aberration* aberrations;
     __global const Portal* portals;
+    __global const TlasNode* tlas_nodes;
     __global const TriangleBlock* triangle_blocks;
 } SceneTables;
 
@@ -34,4 +35,5 @@ typedef struct SceneTables {
 #define MATERIAL(i) (sc.materials[(i)])
 #define ABERRATION(i) (sc.aberrations[(i)])
 #define PORTAL(i) (sc.portals[(i)])
+#define TLAS_NODE(i) (sc.tlas_nodes[(i)])
 #define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])

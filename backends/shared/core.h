@@ -20,8 +20,8 @@
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
  *               BVH_NODE(i) (a BvhNode, or a Bvh4Node with BVH_WIDTH 4), INSTANCE(i),
- *               MATERIAL(i), ABERRATION(i), PORTAL(i), TRIANGLE_BLOCK(i) (records, from
- *               the bindings file)
+ *               MATERIAL(i), ABERRATION(i), PORTAL(i), TLAS_NODE(i), TRIANGLE_BLOCK(i)
+ *               (records, from the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
@@ -38,6 +38,8 @@
  *   BVH_WIDTH          2: binary nodes, one triangle at a time; 4: 4-wide nodes (child boxes SoA,
  *                      slabbed with 4-vector ops) whose leaves are blocks of 4 triangles tested at
  *                      once (layout.h; the packer's bvh_width, from the table's dtype)
+ *   USE_TLAS           find instances through the top-level tree (tlas_nodes), not a loop over all
+ *   TLAS_STACK_SIZE    its traversal stack; the host sizes it to the tree's depth
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -69,6 +71,12 @@
 #endif
 #ifndef BVH_STACK_SIZE
 #define BVH_STACK_SIZE 64
+#endif
+#ifndef USE_TLAS
+#define USE_TLAS 1
+#endif
+#ifndef TLAS_STACK_SIZE
+#define TLAS_STACK_SIZE 32
 #endif
 
 #ifndef HAS_METRIC
@@ -134,6 +142,8 @@
 STRUCT_BEGIN(Ray)
     real3 o;          /* origin of the leg */
     real3 r;          /* world direction */
+    real o_len;       /* |o| and |r|, computed once per leg (t_min, tie windows, nudges, lengths) */
+    real r_len;
     real3 w;          /* perceived direction (unit) */
     real3 d0;         /* primary direction, carried through portals (the "restore" exit rule) */
     real L;           /* path length at o: world units travelled */
@@ -308,25 +318,12 @@ FORCE_INLINE real4 intersect_triangle(ShearedRay sr, real3 v0, real3 v1, real3 v
     return R4(t, u * inv, v * inv, w * inv);
 }
 
-/* Test triangle k of instance row; keep the hit smallest in (t, instance, triangle). */
-FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k, int row, bool cull, real t_min)
-{
-    Triangle tri = TRIANGLE(k);
-    real4 h = intersect_triangle(sr, TO_REAL3(tri.v0.xyz), TO_REAL3(tri.v1.xyz), TO_REAL3(tri.v2.xyz), cull);
-    if (h.x > t_min && (h.x < best.t || (h.x == best.t && row == best.instance && k < best.triangle))) {
-        best.t = h.x;
-        best.bary = R3(h.y, h.z, h.w);
-        best.instance = row;
-        best.triangle = k;
-    }
-    return best;
-}
-
-#if BVH_WIDTH == 4
-/* Keep lane hit (t, w0, w1, w2) of triangle k if it beats best: test_triangle's rule. */
+/* Keep hit (t, w0, w1, w2) of triangle k of instance row if it beats best: the hit smallest in
+ * (t, instance, triangle), so neither the tree's nor a block's visiting order shows in results. */
 FORCE_INLINE MeshHit keep_nearer(MeshHit best, bool ok, real t, real u, real v, real w, int k, int row, real t_min)
 {
-    if (ok && t > t_min && (t < best.t || (t == best.t && row == best.instance && k < best.triangle))) {
+    bool tie_wins = row < best.instance || (row == best.instance && k < best.triangle);
+    if (ok && t > t_min && (t < best.t || (t == best.t && best.instance >= 0 && tie_wins))) {
         best.t = t;
         best.bary = R3(u, v, w);
         best.instance = row;
@@ -335,6 +332,15 @@ FORCE_INLINE MeshHit keep_nearer(MeshHit best, bool ok, real t, real u, real v, 
     return best;
 }
 
+/* Test triangle k of instance row (keep_nearer's rule). */
+FORCE_INLINE MeshHit test_triangle(SCENE_DECL MeshHit best, ShearedRay sr, int k, int row, bool cull, real t_min)
+{
+    Triangle tri = TRIANGLE(k);
+    real4 h = intersect_triangle(sr, TO_REAL3(tri.v0.xyz), TO_REAL3(tri.v1.xyz), TO_REAL3(tri.v2.xyz), cull);
+    return keep_nearer(best, true, h.x, h.y, h.z, h.w, k, row, t_min);
+}
+
+#if BVH_WIDTH == 4
 /* The x, y or z float4 of a block's vertex (axis i, per ray, once per block: not per lane). */
 #define BLOCK_AXIS(blk, V, i) TO_REAL4((i) == 0 ? blk.V##x : ((i) == 1 ? blk.V##y : blk.V##z))
 
@@ -604,7 +610,11 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #endif
 }
 
-/* The nearest triangle hit with t_min < t <= t_max over every instance, culled by world bounds. */
+/* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
+ * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py), nearest child first;
+ * each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
+ * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
+ * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
 FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
 {
     MeshHit best;
@@ -612,17 +622,74 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     best.bary = R3S(0.0f);
     best.instance = -1;
     best.triangle = -1;
-    if (!(dot(d, d) > REAL(0.0f))) {
+    int count = SETTINGS.counts.x;
+    if (!(dot(d, d) > REAL(0.0f)) || count == 0) {
         return best; /* a zero or NaN direction hits nothing */
     }
     real3 inv = safe_inverse(d);
-    int count = SETTINGS.counts.x;
+#if USE_TLAS
+    int stack_node[TLAS_STACK_SIZE];
+    real stack_t[TLAS_STACK_SIZE];
+    int sp = 0;
+    TlasNode node = TLAS_NODE(0);
+    bool more = slab_hit(slab(o, inv, TO_REAL3(node.lo.xyz), TO_REAL3(node.hi.xyz)), t_min, best.t);
+    /* While-while, as trace_instance: descend to a leaf, then trace its instance outside the descent
+     * loop, so SIMD lanes (llvmpipe) run the large instance code once per leaf, not per node. */
+    while (more) {
+        while (AS_INT(node.hi.w) == 0 && more) {
+            int first = AS_INT(node.lo.w);
+            TlasNode c0 = TLAS_NODE(first);
+            TlasNode c1 = TLAS_NODE(first + 1);
+            real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
+            real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));
+            bool hit0 = slab_hit(h0, t_min, best.t);
+            bool hit1 = slab_hit(h1, t_min, best.t);
+            if (hit0 || hit1) {
+                /* The nearer child now, the other on the stack (the host sizes it to the tree's depth). */
+                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
+                if (hit0 && hit1 && sp < TLAS_STACK_SIZE) {
+                    stack_node[sp] = second_first ? first : first + 1;
+                    stack_t[sp] = second_first ? h0.x : h1.x;
+                    sp += 1;
+                }
+                node = second_first ? c1 : c0;
+            } else {
+                more = false;
+                while (sp > 0 && !more) {
+                    sp -= 1;
+                    if (stack_t[sp] <= best.t) {
+                        node = TLAS_NODE(stack_node[sp]);
+                        more = true;
+                    }
+                }
+            }
+        }
+        if (more) {
+            /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node
+             * still entered before the best hit, or done. */
+            int row = AS_INT(node.lo.w);
+            real2 h = slab(o, inv, INSTANCE(row).bounds_min.xyz, INSTANCE(row).bounds_max.xyz);
+            if (slab_hit(h, t_min, best.t)) {
+                best = trace_instance(SCENE_PASS best, row, o, d, t_min);
+            }
+            more = false;
+            while (sp > 0 && !more) {
+                sp -= 1;
+                if (stack_t[sp] <= best.t) {
+                    node = TLAS_NODE(stack_node[sp]);
+                    more = true;
+                }
+            }
+        }
+    }
+#else
     for (int i = 0; i < count; ++i) {
         real2 h = slab(o, inv, INSTANCE(i).bounds_min.xyz, INSTANCE(i).bounds_max.xyz);
         if (slab_hit(h, t_min, best.t)) {
             best = trace_instance(SCENE_PASS best, i, o, d, t_min);
         }
     }
+#endif
     return best;
 }
 
@@ -717,10 +784,10 @@ bool same_direction(real3 a, real3 b)
     return a.x == b.x && a.y == b.y && a.z == b.z;
 }
 
-/* Candidates within this of the nearest (at t from o) are tied: |o| + t bounds the event point's size. */
-real tie_window(real3 o, real t)
+/* Candidates within this of the nearest (at t from o, o_len = |o|) are tied: |o| + t bounds the event point's size. */
+real tie_window(real o_len, real t)
 {
-    return TIE_RELATIVE * max(REAL(1.0f), length(o) + t);
+    return TIE_RELATIVE * max(REAL(1.0f), o_len + t);
 }
 #endif
 
@@ -818,9 +885,9 @@ int containing_box(SCENE_DECL real3 p)
 }
 
 /* The active box just past the point o + t r (NUDGE_RELATIVE of its size further along r). */
-int box_after(SCENE_DECL real3 o, real3 r, real t)
+int box_after(SCENE_DECL real3 o, real3 r, real o_len, real t)
 {
-    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), length(o) + t);
+    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t);
     return containing_box(SCENE_PASS o + (t + nudge) * r);
 }
 
@@ -837,33 +904,21 @@ real3 metric_local(Aberration box, real3 w)
     return (R3S(1.0f) + box.deformation.xyz) * axes;
 }
 
-/* r = normalize(R (s (.) R^T w)) (aberrations.world_direction); previous if degenerate. A box with
- * D = 0 leaves the unit w as it is (renormalising would only add rounding). */
-real3 metric_direction(Aberration box, real3 w, real3 previous)
+/* r = normalize(R scaled) (aberrations.world_direction), scaled = metric_local(box, w); previous if
+ * degenerate. (The caller skips a box with D = 0: it leaves the unit w as it is.) */
+real3 metric_direction(Aberration box, real3 scaled, real3 previous)
 {
-    if (zero_deformation(box)) {
-        return w;
-    }
-    real3 scaled = metric_local(box, w);
     real3 world = R3(dot(box.rot0.xyz, scaled), dot(box.rot1.xyz, scaled), dot(box.rot2.xyz, scaled));
     return normalize_or_keep(world, previous);
 }
 #endif
 
-/* Perceived length per world length (aberrations.perceived_per_world): 1 / |s (.) R^T w| in a metric
- * box (0 where the norm overflows), 1 elsewhere and in a box with D = 0. */
-real perceived_rate(SCENE_DECL int row, real3 w)
+/* Perceived length per world length in a metric box (aberrations.perceived_per_world): 1 / |scaled|,
+ * scaled = metric_local(box, w) (0 where the norm overflows); 1 elsewhere and in a box with D = 0. */
+real perceived_rate(real3 scaled)
 {
-#if HAS_METRIC
-    if (row >= 0) {
-        Aberration box = ABERRATION(row);
-        if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
-            real norm = length(metric_local(box, w));
-            return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
-        }
-    }
-#endif
-    return REAL(1.0f);
+    real norm = length(scaled);
+    return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
 }
 
 #if HAS_BENDING
@@ -931,15 +986,18 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
     Turn turn;
     turn.w = w;
     turn.r = w;
+    turn.f = REAL(1.0f);
 #if HAS_METRIC
     if (next >= 0) {
+        /* s (.) R^T w once, for both the direction and the rate. */
         Aberration box = ABERRATION(next);
-        if (box.meta.x == MODE_METRIC) {
-            turn.r = metric_direction(box, w, r);
+        if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
+            real3 scaled = metric_local(box, w);
+            turn.r = metric_direction(box, scaled, r);
+            turn.f = perceived_rate(scaled);
         }
     }
 #endif
-    turn.f = perceived_rate(SCENE_PASS next, turn.w);
     return turn;
 }
 #endif
@@ -983,14 +1041,15 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
  * a new leg starts on the target quad, which the ray is then leaving. The active box is the caller's. */
 FORCE_INLINE Ray teleport(SCENE_DECL Ray ray, int row, real t)
 {
-    real len_r = length(ray.r);
-    ray.L = ray.L + t * len_r;
-    ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
+    ray.L = ray.L + t * ray.r_len;
+    ray.Lambda = ray.Lambda + (t - ray.t_piece) * ray.r_len * ray.f;
     Portal portal = PORTAL(row);
     ray.o = affine_point(portal.transfer0, portal.transfer1, portal.transfer2, ray.o + t * ray.r);
     ray.r = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.r), ray.r);
     ray.w = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.w), ray.w);
     ray.d0 = normalize_or_keep(linear_vector(portal.transfer0, portal.transfer1, portal.transfer2, ray.d0), ray.d0);
+    ray.o_len = length(ray.o);
+    ray.r_len = length(ray.r);
     ray.t_from = REAL(0.0f);
     ray.t_piece = REAL(0.0f);
     ray.leaving_kind = EVENT_PORTAL;
@@ -1014,6 +1073,8 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
     Ray ray;
     ray.o = cam.position.xyz;
     ray.r = d;
+    ray.o_len = length(ray.o);
+    ray.r_len = length(d);
     ray.w = d;
     ray.d0 = d;
     ray.L = REAL(0.0f);
@@ -1034,9 +1095,9 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
  * the direction changed. Lambda is closed off where the perceived rate changes. */
 FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
 {
-    int next = box_after(SCENE_PASS ray.o, ray.r, t);
+    int next = box_after(SCENE_PASS ray.o, ray.r, ray.o_len, t);
     Turn turn = transition(SCENE_PASS ray.aberration, next, ray.w, ray.r, ray.d0, lo, hi);
-    real len_r = length(ray.r);
+    real len_r = ray.r_len;
     if (same_direction(turn.r, ray.r)) {
         if (turn.f != ray.f) {
             ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
@@ -1048,6 +1109,8 @@ FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
         ray.Lambda = ray.Lambda + (t - ray.t_piece) * len_r * ray.f;
         ray.o = ray.o + t * ray.r;
         ray.r = turn.r;
+        ray.o_len = length(ray.o);
+        ray.r_len = length(ray.r);
         ray.t_from = REAL(0.0f);
         ray.t_piece = REAL(0.0f);
     }
@@ -1073,6 +1136,11 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     real3 sigma_hi = cam.sigma_max.xyz;
     ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
 #endif
+    MeshHit hit;
+    hit.t = REAL_MAX;
+    hit.bary = R3S(0.0f);
+    hit.instance = -1;
+    hit.triangle = -1;
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
     /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
@@ -1082,7 +1150,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         }
         /* 1. The nearest of: a linked portal quad, a box face, a mesh triangle, past the point the ray
          * leaves (t_from along the leg) by t_min, skipping the surface it leaves. */
-        real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), length(ray.o) + ray.t_from);
+        real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
         real t_cut = REAL_MAX;
 #if HAS_PORTALS
         Event portal = nearest_portal(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
@@ -1091,7 +1159,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #if HAS_ABERRATIONS
         Event face = nearest_box_face(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
         if (face.t < REAL_MAX) {
-            t_cut = min(t_cut, face.t + tie_window(ray.o, face.t));
+            t_cut = min(t_cut, face.t + tie_window(ray.o_len, face.t));
         }
 #endif
         /* The mesh search stops where a mesh can no longer win. */
@@ -1107,7 +1175,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         nearest = min(nearest, face.t);
 #endif
         if (nearest < REAL_MAX) {
-            real limit = nearest + tie_window(ray.o, nearest);
+            real limit = nearest + tie_window(ray.o_len, nearest);
 #if HAS_ABERRATIONS
             if (face.t <= limit) {
                 kind = EVENT_ABERRATION;
@@ -1128,12 +1196,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             break;
         }
         if (kind == EVENT_MESH) {
-            real len_r = length(ray.r);
-            real3 position = ray.o + mesh.t * ray.r;
-            px.color = quantize_rgba(shade(SCENE_PASS cam, mesh, ray.r, position));
-            px.depth = TO_FLOAT(ray.L + mesh.t * len_r);
-            px.perceived = TO_FLOAT(ray.Lambda + (mesh.t - ray.t_piece) * len_r * ray.f);
-            px.instance = INSTANCE(mesh.instance).meta.z;
+            hit = mesh; /* shaded after the loop */
             break;
         }
         ray.n += 1;
@@ -1154,6 +1217,16 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             ray.leaving = face.row;
         }
 #endif
+    }
+    /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
+     * code masked on every pass. */
+    if (hit.instance >= 0) {
+        real len_r = ray.r_len;
+        real3 position = ray.o + hit.t * ray.r;
+        px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
+        px.depth = TO_FLOAT(ray.L + hit.t * len_r);
+        px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
+        px.instance = INSTANCE(hit.instance).meta.z;
     }
     px.events = ray.n;
     return px;

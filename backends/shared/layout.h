@@ -123,6 +123,14 @@ STRUCT_BEGIN(Portal)
     int4 meta;
 STRUCT_END(Portal)
 
+/* tlas_nodes: the top-level tree over instances (engine/tlas.py), the BvhNode's layout:
+ * AS_INT(hi.w) = count; count == 1: a leaf over instance row AS_INT(lo.w); count == 0: an
+ * interior node whose children are AS_INT(lo.w) and AS_INT(lo.w) + 1. Root at row 0. */
+STRUCT_BEGIN(TlasNode)
+    float4 lo;
+    float4 hi;
+STRUCT_END(TlasNode)
+
 /* camera: one row per frame. position is camera-relative; right/up/back are the
  * columns of R_cam; origin is the packed origin (for world-space checkers);
  * lens = (tan(fov/2), aspect, 0, 0); size = (width, height, 0, 0). */

@@ -166,13 +166,21 @@ def _overhead(results: dict[str, Any]) -> list[str]:
             f"{_ms(e['median_ms'])} ({_ms(e['min_ms'])}–{_ms(e['max_ms'])})",
             *[_ms(e["systems_ms"].get(s)) for s in systems],
             f"{e['upload_bytes']} B",
+            f"{e['tlas_upload_ticks']} of {e['ticks']}" if "tlas_upload_ticks" in e else "–",
             ", ".join(
                 f"{u['table']}[{'all' if u['rows'] is None else '{}:{}'.format(*u['rows'])}]" for u in e["updates"]
             ),
         ]
         for e in entries
     ]
-    header = ["backend", "tick ms median (min–max)", *[f"{s} ms" for s in systems], "upload", "tables"]
+    header = [
+        "backend",
+        "tick ms median (min–max)",
+        *[f"{s} ms" for s in systems],
+        "upload",
+        "ticks uploading TLAS rows",
+        "tables",
+    ]
     return [
         "## Engine overhead per tick (render skipped)",
         "",

@@ -1,0 +1,280 @@
+"""The top-level tree over instances (engine/tlas.py, ``tlas_nodes``): its shape, its incremental updates, and
+frames of many-instance scenes, moved instances included, against the reference in every backend."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import require_backend
+from test_parity import DEPTH_MEDIAN_MAX, F64_DEPTH_P99_MAX, FAST_BACKENDS, MISMATCH_MAX, assert_clean, compare
+
+from backends.base import AOVS
+from backends.reference.backend import ReferenceBackend
+from components import Transform
+from engine.camera_view import scene_camera
+from engine.layout import TLAS_NODE_DTYPE
+from engine.packing import ScenePacker, TableUpdate
+from engine.scene import Scene
+from engine.tlas import FAT_MARGIN, InstanceTlas
+
+
+def random_bounds(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    lo = rng.uniform(-20.0, 20.0, (n, 3))
+    return lo, lo + rng.uniform(0.0, 3.0, (n, 3)) * (rng.random((n, 3)) > 0.1)  # some flat (planes)
+
+
+def check_tree(tree: InstanceTlas, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Every instance in exactly one leaf, reachable from the root; parents hold their children; fat leaves
+    hold the exact bounds; parent links and depth agree with the nodes."""
+    nodes = tree.nodes
+    n = len(lo)
+    assert nodes.dtype == TLAS_NODE_DTYPE
+    if n == 0:
+        assert tree.count == 0 and len(nodes) == 1
+        return
+    assert tree.count == len(nodes) == 2 * n - 1
+    seen: list[int] = []
+    stack, depth = [(0, 1)], 0
+    while stack:
+        node, level = stack.pop()
+        depth = max(depth, level)
+        if nodes["count"][node] > 0:
+            assert nodes["count"][node] == 1
+            row = int(nodes["first"][node])
+            seen.append(row)
+            assert tree.leaf[row] == node
+            assert np.all(nodes["bounds_min"][node] <= lo[row]) and np.all(nodes["bounds_max"][node] >= hi[row])
+            assert np.all(tree.fat_lo[row] <= lo[row]) and np.all(tree.fat_hi[row] >= hi[row])
+            continue
+        for kid in (int(nodes["first"][node]), int(nodes["first"][node]) + 1):
+            assert tree.parent[kid] == node
+            assert np.all(nodes["bounds_min"][node] <= nodes["bounds_min"][kid])
+            assert np.all(nodes["bounds_max"][node] >= nodes["bounds_max"][kid])
+            stack.append((kid, level + 1))
+    assert sorted(seen) == list(range(n))
+    assert depth == tree.depth
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 17, 300])
+def test_build_reaches_every_instance_once_and_bounds_nest(n: int) -> None:
+    lo, hi = random_bounds(n)
+    tree = InstanceTlas.build(lo, hi)
+    check_tree(tree, lo, hi)
+    if n > 1:
+        assert tree.depth <= 2 * int(np.ceil(np.log2(n))) + 2  # balanced enough for a small stack
+
+
+def test_a_floor_spanning_the_scene_sits_near_the_root() -> None:
+    """The SAH keeps a huge plane out of the small boxes' subtree: rays over the boxes never meet it."""
+    lo, hi = random_bounds(40, seed=8)
+    lo = np.vstack([lo * 0.1, [[-100.0, -1.0, -100.0]]])
+    hi = np.vstack([hi * 0.1, [[100.0, -1.0, 100.0]]])
+    tree = InstanceTlas.build(lo, hi)
+    check_tree(tree, lo, hi)
+    floor_leaf = int(tree.leaf[40])
+    assert tree.parent[floor_leaf] == 0
+
+
+def test_fat_boxes_grow_each_axis_by_the_margin() -> None:
+    lo, hi = np.array([[0.0, 0.0, 0.0], [0.0, 5.0, 0.0]]), np.array([[2.0, 1.0, 4.0], [40.0, 5.0, 40.0]])
+    tree = InstanceTlas.build(lo, hi)
+    np.testing.assert_allclose(tree.fat_hi[0] - hi[0], FAT_MARGIN * np.array([2.0, 1.0, 4.0]))
+    # A plane's thin axis grows by a tenth of its width's margin, not by nothing (and not by its width).
+    np.testing.assert_allclose(tree.fat_hi[1] - hi[1], FAT_MARGIN * np.array([40.0, 4.0, 40.0]))
+
+
+def test_update_inside_the_fat_box_changes_nothing_outside_refits_the_path() -> None:
+    lo, hi = random_bounds(64)
+    tree = InstanceTlas.build(lo, hi)
+    before = tree.nodes.copy()
+    nudge = 0.5 * np.min(tree.fat_hi[5] - hi[5])
+    assert tree.update([5], lo[5:6] + nudge, hi[5:6] + nudge) == []
+    np.testing.assert_array_equal(tree.nodes, before)
+    lo[5] += 30.0
+    hi[5] += 30.0
+    changed = tree.update([5], lo[5:6], hi[5:6])
+    assert changed is not None and 1 <= len(changed) <= tree.depth
+    assert int(tree.leaf[5]) in changed and 0 in changed
+    differs = np.flatnonzero(
+        np.any(
+            before.view(np.uint8).reshape(len(before), -1) != tree.nodes.view(np.uint8).reshape(len(before), -1), axis=1
+        )
+    )
+    assert set(differs) <= set(changed)
+    check_tree(tree, lo, hi)
+    assert tree.refits == 1 and tree.rebuilds == 1
+
+
+def test_many_escaping_at_once_rebuild() -> None:
+    lo, hi = random_bounds(64)
+    tree = InstanceTlas.build(lo, hi)
+    rows = np.arange(0, 64, 2)
+    lo[rows] += 10.0
+    hi[rows] += 10.0
+    assert tree.update(rows, lo[rows], hi[rows]) is None
+    assert tree.rebuilds == 2
+    check_tree(tree, lo, hi)
+
+
+def test_translate_keeps_the_tree_valid() -> None:
+    lo, hi = random_bounds(50)
+    tree = InstanceTlas.build(lo, hi)
+    delta = np.array([16.0, -32.0, 0.0])
+    tree.translate(delta, lo - delta, hi - delta)
+    check_tree(tree, lo - delta, hi - delta)
+
+
+# --- the packer ---------------------------------------------------------------------------------------
+
+
+def many_boxes(count: int = 60, seed: int = 11) -> Scene:
+    """A floor and ``count`` boxes of random size and turn, spread in front of the camera."""
+    rng = np.random.default_rng(seed)
+    scene = Scene("many-boxes")
+    scene.add_mesh("floor", "plane", position=(0.0, -2.0, -4.0), scale=(30.0, 1.0, 30.0), checker=0.5)
+    for k in range(count):
+        scene.add_mesh(
+            f"box{k}",
+            "box",
+            position=tuple(rng.uniform([-6.0, -2.0, -12.0], [6.0, 3.0, 1.0])),
+            euler_deg=tuple(rng.uniform(-180.0, 180.0, 3)),
+            scale=tuple(rng.uniform(0.2, 1.2, 3)),
+            color=tuple(rng.uniform(0.2, 1.0, 3)),
+        )
+    scene.set_camera((0.0, 1.5, 5.0), look_at=(0.0, 0.0, -4.0), fov_deg=70.0)
+    return scene
+
+
+def move(scene: Scene, name: str, by: tuple[float, float, float]) -> None:
+    entity = scene.entity(name)
+    t = scene.get(entity, Transform)
+    scene.set(entity, replace(t, position=tuple(np.add(t.position, by))))
+
+
+def packed_tree_is_valid(packer: ScenePacker) -> None:
+    packed = packer.packed
+    assert packed is not None
+    n = packed.counts["instances"]
+    table = packed.tables["instances"]
+    check_tree(packer.tlas, table["bounds_min"][:n, :3].astype(float), table["bounds_max"][:n, :3].astype(float))
+    assert packed.tables["tlas_nodes"] is packer.tlas.nodes
+    assert packed.counts["tlas_nodes"] == max(0, 2 * n - 1)
+
+
+def test_packer_small_move_one_instance_row_large_move_a_few_tree_rows() -> None:
+    scene = many_boxes()
+    packer = ScenePacker()
+    packer.sync(scene)
+    packed_tree_is_valid(packer)
+    row = packer._instance_row[scene.entity("box7")]
+    move(scene, "box7", (0.01, 0.0, 0.0))
+    assert packer.sync(scene) == [TableUpdate("instances", range(row, row + 1))]
+    move(scene, "box7", (5.0, 0.0, 0.0))
+    updates = packer.sync(scene)
+    assert updates[0] == TableUpdate("instances", range(row, row + 1))
+    tree_rows = [u.rows for u in updates if u.table == "tlas_nodes"]
+    assert {u.table for u in updates} == {"instances", "tlas_nodes"} and all(r is not None for r in tree_rows)
+    assert 2 <= sum(len(r) for r in tree_rows) <= packer.tlas.depth  # the leaf and some of its ancestors
+    packed_tree_is_valid(packer)
+    assert packer.sync(scene) == []
+
+
+def test_packer_rebuilds_on_added_deleted_or_many_moved_instances() -> None:
+    scene = many_boxes()
+    packer = ScenePacker()
+    packer.sync(scene)
+    scene.add_mesh("extra", "sphere", position=(0.0, 4.0, -3.0))
+    assert TableUpdate("tlas_nodes") in packer.sync(scene)
+    packed_tree_is_valid(packer)
+    scene.delete(scene.entity("box3"))
+    assert TableUpdate("tlas_nodes") in packer.sync(scene)
+    packed_tree_is_valid(packer)
+    for k in range(0, 40, 2):
+        move(scene, f"box{k}", (0.0, 6.0, 0.0))
+    updates = packer.sync(scene)
+    assert TableUpdate("tlas_nodes") in updates and packer.tlas.rebuilds >= 2
+    packed_tree_is_valid(packer)
+
+
+def test_origin_shift_moves_the_tree_with_the_instances() -> None:
+    scene = many_boxes()
+    packer = ScenePacker(origin_cell=4.0)
+    packer.sync(scene)
+    camera = scene.camera_entity
+    t = scene.get(camera, Transform)
+    scene.set(camera, replace(t, position=(9.0, 1.5, 5.0)))
+    updates = packer.sync(scene)
+    assert TableUpdate("instances") in updates and TableUpdate("tlas_nodes") in updates
+    packed_tree_is_valid(packer)
+
+
+# --- frames --------------------------------------------------------------------------------------------
+
+
+_last: list[TableUpdate] = []
+
+
+def _sync(packer: ScenePacker, scene: Scene):
+    """Sync and keep the updates in ``_last`` (so one expression can upload both)."""
+    _last[:] = packer.sync(scene)
+    assert packer.packed is not None
+    return packer.packed
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_moved_instances_render_as_the_reference_sees_them(backend_factory, backend_name, precision) -> None:
+    """60 boxes; some moved within their fat leaves, some far (refits), uploaded incrementally: the
+    device's tree is the host's, and the frame matches the reference's within the parity thresholds."""
+    require_backend(backend_name)
+    backend = backend_factory(backend_name, precision)
+    scene = many_boxes()
+    size = (96, 72)
+    try:
+        packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
+        backend.upload(_sync(packer, scene), list(_last))
+        for name, by in (("box1", (0.02, 0.0, 0.0)), ("box2", (-4.0, 1.0, 2.0)), ("box9", (3.0, -1.0, -5.0))):
+            move(scene, name, by)
+            backend.upload(_sync(packer, scene), list(_last))
+        assert backend.read_table("tlas_nodes")[: packer.tlas.nodes.nbytes] == packer.tlas.nodes.tobytes()
+        fast = backend.render(scene_camera(scene), *size, AOVS)
+        reference = ReferenceBackend()
+        ref_packer = ScenePacker(precision="f64", camera_relative=False)
+        reference.upload(_sync(ref_packer, scene), list(_last))
+        truth = reference.render(scene_camera(scene), *size, AOVS)
+    finally:
+        scene.close()
+    assert_clean(fast)
+    result = compare(fast, truth)
+    assert (truth.instance >= 0).mean() > 0.5
+    assert result.mismatch <= MISMATCH_MAX, result
+    if precision == "f64":
+        assert result.depth_p99 <= F64_DEPTH_P99_MAX, result
+    else:
+        assert result.depth_median <= DEPTH_MEDIAN_MAX, result
+
+
+@pytest.mark.parametrize("backend_name", ["glsl", "opencl"])
+def test_the_tree_and_the_loop_give_identical_frames(backend_factory, backend_name) -> None:
+    """Traversal order is unseen: hits at equal t go to the lower instance row either way."""
+    require_backend(backend_name)
+    backend = backend_factory(backend_name, "f32")
+    scene = many_boxes(seed=4)
+    # Coincident duplicates: equal t on two instances, the lower row must win in both orders.
+    scene.add_mesh("twin", "box", position=(0.0, 0.0, -2.0), scale=1.5)
+    scene.add_mesh("twin2", "box", position=(0.0, 0.0, -2.0), scale=1.5)
+    twin = scene.entity("twin")
+    try:
+        backend.upload(_sync(ScenePacker(), scene), list(_last))
+        frames = []
+        for use in (1, 0):
+            backend.extra_defines = {"USE_TLAS": use}
+            frames.append(backend.render(scene_camera(scene), 80, 60, AOVS))
+    finally:
+        backend.extra_defines = {}
+        scene.close()
+    for name in AOVS:
+        np.testing.assert_array_equal(frames[0].aov(name), frames[1].aov(name), err_msg=name)
+    assert twin in frames[0].instance
