@@ -36,8 +36,9 @@ __all__ = [
     "collapse",
     "compact",
     "compact_boxes",
-    "offset_compact",
+    "compact_frame",
     "leaf_blocks",
+    "offset_compact",
 ]
 
 log = logging.getLogger(__name__)
@@ -415,28 +416,34 @@ def _at_most(q: np.ndarray, origin: np.ndarray, scale: np.ndarray, bound: np.nda
     """Whether every float32 decoding of grid coordinate ``q`` is <= ``bound`` (float32)."""
     unfused, total, err = _decoded(q, origin, scale)
     b = bound.astype(np.float64)
-    return (unfused <= bound) & ((total < b) | ((total == b) & (err <= 0)))
+    flushed = np.where(np.abs(total) < _F32_NORMAL, 0.0, total)  # a GPU may flush a subnormal result to 0
+    return (unfused <= bound) & ((total < b) | ((total == b) & (err <= 0))) & (flushed <= b)
 
 
 def _at_least(q: np.ndarray, origin: np.ndarray, scale: np.ndarray, bound: np.ndarray) -> np.ndarray:
     """Whether every float32 decoding of grid coordinate ``q`` is >= ``bound`` (float32)."""
     unfused, total, err = _decoded(q, origin, scale)
     b = bound.astype(np.float64)
-    return (unfused >= bound) & ((total > b) | ((total == b) & (err >= 0)))
+    flushed = np.where(np.abs(total) < _F32_NORMAL, 0.0, total)
+    return (unfused >= bound) & ((total > b) | ((total == b) & (err >= 0))) & (flushed >= b)
 
 
 def compact_frame(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(origin, scale)`` float32 of the grid over a root box: ``origin = lo``, and ``origin +
     GRID_MAX * scale >= hi`` however it is rounded; scale is normal (no flush to zero on a GPU)."""
     origin = lo.astype(np.float32)
+    # no subnormal origin (a GPU may flush it to 0): 0 below a positive one, -tiny below a negative one
+    origin = np.where(np.abs(origin) < _F32_NORMAL, np.where(origin > 0, 0.0, -_F32_NORMAL), origin)
+    origin = np.where(lo.astype(np.float32) == 0, lo.astype(np.float32), origin).astype(np.float32)
     extent = hi.astype(np.float64) - origin.astype(np.float64)
     scale = np.maximum(np.float32(extent / GRID_MAX), _F32_NORMAL).astype(np.float32)
     top = np.full(3, GRID_MAX)
-    for _ in range(64):  # a few ulps at most
+    for step in range(80):  # a few ulps, then doubling (where the top lands on a subnormal)
         short = ~_at_least(top, origin, scale, hi.astype(np.float32))
         if not short.any():
             break
-        scale = np.where(short, np.nextafter(scale, np.float32(np.inf)), scale).astype(np.float32)
+        grown = np.nextafter(scale, np.float32(np.inf)) if step < 16 else scale * np.float32(2)
+        scale = np.where(short, grown, scale).astype(np.float32)
     return origin, scale
 
 
