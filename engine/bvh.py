@@ -4,7 +4,10 @@ The tree is stored in :data:`engine.layout.BVH_NODE_DTYPE`, the exact bytes the
 kernels traverse. Indices are relative to the asset; the packer adds offsets.
 :func:`collapse` turns it into a 4-wide tree (:data:`engine.layout.BVH4_NODE_DTYPE`)
 for tracers that test four boxes at once with 4-vector operations; the wide tree
-has the same leaves, so the triangles' order is the binary tree's.
+has the same leaves, so the triangles' order is the binary tree's. :func:`compact`
+packs a binary tree as :data:`engine.layout.BVH_COMPACT_NODE_DTYPE` records (both
+children's boxes on a 16-bit grid, conservative) for GLSL, where texel loads bound
+the traversal.
 
 Python cannot afford a per-node loop (a 200k-triangle mesh has ~100k nodes), so
 the builder is *level-synchronous*: every node of one tree level is binned,

@@ -13,8 +13,9 @@ Two families exist:
   ``bvh_nodes``, ``materials``, ``settings``, ``triangle_blocks``): always
   32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
-  may traverse them. ``bvh_nodes`` has one of two dtypes, chosen by the
-  packer's ``bvh_width`` (the backend's): binary :data:`BVH_NODE_DTYPE`, or
+  may traverse them. ``bvh_nodes`` has one of three dtypes, chosen by the
+  packer's ``bvh_width`` and ``bvh_compact`` (the backend's): binary
+  :data:`BVH_NODE_DTYPE`, compact binary :data:`BVH_COMPACT_NODE_DTYPE` (GLSL), or
   4-wide :data:`BVH4_NODE_DTYPE`, whose leaves name rows of
   ``triangle_blocks`` (empty with binary trees).
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):

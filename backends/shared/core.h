@@ -19,7 +19,8 @@
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
- *               BVH_NODE(i) (a BvhNode, or a Bvh4Node with BVH_WIDTH 4), INSTANCE(i),
+ *               BVH_NODE(i) (a BvhNode, a BvhCompactNode with BVH_COMPACT, or a Bvh4Node
+ *               with BVH_WIDTH 4), INSTANCE(i),
  *               MATERIAL(i), ABERRATION(i), PORTAL(i), TRIANGLE_BLOCK(i) (records, from
  *               the bindings file)
  *
@@ -38,6 +39,8 @@
  *   BVH_WIDTH          2: binary nodes, one triangle at a time; 4: 4-wide nodes (child boxes SoA,
  *                      slabbed with 4-vector ops) whose leaves are blocks of 4 triangles tested at
  *                      once (layout.h; the packer's bvh_width, from the table's dtype)
+ *   BVH_COMPACT        1 with BVH_WIDTH 2: compact records, both children's boxes (16-bit grid) and
+ *                      links in one 32-byte record (the packer's bvh_compact; GLSL on llvmpipe)
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
