@@ -79,6 +79,8 @@ class Backend(ABC):
     camera_relative: ClassVar[bool] = True
     #: The BVH width its packer should build (``ScenePacker(bvh_width=...)``): what it traverses fastest.
     bvh_width: ClassVar[int] = 2
+    #: Whether its packer should write binary trees as compact records (``ScenePacker(bvh_compact=...)``).
+    bvh_compact: ClassVar[bool] = False
 
     @classmethod
     @abstractmethod

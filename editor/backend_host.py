@@ -119,7 +119,10 @@ class BackendHost:
         try:
             if self._packer is None:
                 self._packer = ScenePacker(
-                    self.backend.precision, self.backend.camera_relative, bvh_width=self.backend.bvh_width
+                    self.backend.precision,
+                    self.backend.camera_relative,
+                    bvh_width=self.backend.bvh_width,
+                    bvh_compact=self.backend.bvh_compact,
                 )
             updates = self._packer.sync(scene, view.position)
             if updates:

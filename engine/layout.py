@@ -13,8 +13,9 @@ Two families exist:
   ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``):
   always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
-  may traverse them. ``bvh_nodes`` has one of two dtypes, chosen by the
-  packer's ``bvh_width`` (the backend's): binary :data:`BVH_NODE_DTYPE`, or
+  may traverse them. ``bvh_nodes`` has one of three dtypes, chosen by the
+  packer's ``bvh_width`` and ``bvh_compact`` (the backend's): binary
+  :data:`BVH_NODE_DTYPE`, compact binary :data:`BVH_COMPACT_NODE_DTYPE` (GLSL), or
   4-wide :data:`BVH4_NODE_DTYPE`, whose leaves name rows of
   ``triangle_blocks`` (empty with binary trees).
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
@@ -119,16 +120,39 @@ TRIANGLE_BLOCK_DTYPE = _build(
     [(f"v{k}{axis}", "float4", 1) for k in range(3) for axis in "xyz"] + [("index", "int4", 1)], "f32"
 )
 
+#: A compact binary BVH record (``ScenePacker(bvh_compact=True)``, GLSL): an interior node as the
+#: boxes of BOTH its children, 32 bytes, so a visit is 2 texel loads instead of 4 (two children's
+#: :data:`BVH_NODE_DTYPE` rows) and a pop is none. ``child{i}.xyz`` packs child i's box as six
+#: 16-bit grid coordinates ``(lo.x | lo.y << 16, lo.z | hi.x << 16, hi.y | hi.z << 16)`` over the
+#: asset's frame; the decoded float box ``origin + q * scale`` (lo rounded down, hi up, checked on
+#: the host for fused and unfused arithmetic) contains the exact one. ``child{i}.w`` is a link:
+#: ``index << 7 | count``; ``count > 0``, a leaf of triangles ``[index, index + count)``;
+#: ``count == 0``, the record ``index``. Each asset's records start with a header:
+#: ``child0 = (origin.xyz bits, root link)``, ``child1 = (scale.xyz bits, -1)``; its root box is
+#: the whole grid. Indices are absolute in the packed scene.
+BVH_COMPACT_NODE_DTYPE = _build([("child0", "int4", 1), ("child1", "int4", 1)], "f32")
+
+#: Bits of a compact link below its index: leaf counts up to 64 (``BvhParams.max_leaf_size``).
+BVH_LINK_SHIFT = 7
+
 #: The ``bvh_nodes`` dtype of each supported BVH width.
 BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE}
 
 
 def bvh_width(nodes: np.ndarray) -> int:
-    """The BVH width of a ``bvh_nodes`` table, from its dtype."""
+    """The BVH width of a ``bvh_nodes`` table, from its dtype (compact records are binary)."""
+    if nodes.dtype == BVH_COMPACT_NODE_DTYPE:
+        return 2
     for width, dtype in BVH_WIDTHS.items():
         if nodes.dtype == dtype:
             return width
     raise ValueError(f"not a BVH node table: dtype {nodes.dtype}")
+
+
+def bvh_compact(nodes: np.ndarray) -> bool:
+    """Whether a ``bvh_nodes`` table holds compact records (:data:`BVH_COMPACT_NODE_DTYPE`)."""
+    bvh_width(nodes)  # raises on a foreign table
+    return nodes.dtype == BVH_COMPACT_NODE_DTYPE
 
 
 #: A node of the top-level tree over instances (``engine.tlas``), the BVH node's 32 bytes:

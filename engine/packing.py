@@ -22,7 +22,7 @@ import numpy as np
 
 from components import Aberration, Mesh, Portal, Transform
 from engine import layout
-from engine.bvh import BvhParams, cached_bvh, leaf_blocks
+from engine.bvh import BvhParams, cached_bvh, compact, leaf_blocks, offset_compact
 from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
@@ -164,12 +164,17 @@ class ScenePacker:
         bvh_params: BvhParams | None = None,
         bvh_width: int = 2,
         tlas_margin: float = FAT_MARGIN,
+        bvh_compact: bool = False,
     ) -> None:
         if bvh_width not in layout.BVH_WIDTHS:
             raise ValueError(f"bvh_width must be one of {sorted(layout.BVH_WIDTHS)}, got {bvh_width!r}")
+        if bvh_compact and bvh_width != 2:
+            raise ValueError(f"bvh_compact needs bvh_width=2, got {bvh_width!r}")
         self.precision: Precision = precision
         #: Children per BVH node in ``bvh_nodes`` (the backend's ``bvh_width``: what it traverses fastest).
         self.bvh_width = bvh_width
+        #: Binary trees as compact records (the backend's ``bvh_compact``: fewer loads per visit).
+        self.bvh_compact = bvh_compact
         self.camera_relative = camera_relative
         self.origin_cell = origin_cell
         self.bvh_params = bvh_params or BvhParams()
@@ -263,6 +268,10 @@ class ScenePacker:
             packed.versions[u.table] = packed.versions.get(u.table, 0) + 1
         return updates
 
+    def _node_dtype(self) -> np.dtype:
+        """The ``bvh_nodes`` dtype this packer writes."""
+        return layout.BVH_COMPACT_NODE_DTYPE if self.bvh_compact else layout.BVH_WIDTHS[self.bvh_width]
+
     def _resync(self, scene: Scene, camera_position: np.ndarray) -> list[TableUpdate]:
         self.packed = None
         return self.sync(scene, camera_position)
@@ -292,10 +301,13 @@ class ScenePacker:
                 u["uv01"][:, :2] = asset.uvs[faces[:, 0]]
                 u["uv01"][:, 2:] = asset.uvs[faces[:, 1]]
                 u["uv2"][:, :2] = asset.uvs[faces[:, 2]]
-            n = bvh.nodes.copy()
-            if self.bvh_width == 2:
+            if self.bvh_compact:
+                n = offset_compact(compact(bvh), node_base, tri_base)
+            elif self.bvh_width == 2:
+                n = bvh.nodes.copy()
                 n["first"] += np.where(n["count"] > 0, tri_base, node_base)
             else:  # leaves point at their blocks of 4 triangles; empty slots (count < 0) keep child 0
+                n = bvh.nodes.copy()
                 lanes, child = leaf_blocks(bvh)
                 n["child"] = child + np.where(n["count"] > 0, block_base, np.where(n["count"] == 0, node_base, 0))
                 b = np.zeros(len(lanes), dtype=layout.TRIANGLE_BLOCK_DTYPE)
@@ -315,7 +327,7 @@ class ScenePacker:
         tables = {
             "triangles": np.concatenate(tris) if tris else np.zeros(0, layout.TRIANGLE_DTYPE),
             "triangle_uvs": np.concatenate(uvs) if uvs else np.zeros(0, layout.TRIANGLE_UV_DTYPE),
-            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, layout.BVH_WIDTHS[self.bvh_width]),
+            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, self._node_dtype()),
             "triangle_blocks": np.concatenate(blocks) if blocks else np.zeros(0, layout.TRIANGLE_BLOCK_DTYPE),
         }
         counts = {name: len(t) for name, t in tables.items()}

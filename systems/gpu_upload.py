@@ -24,7 +24,10 @@ class GpuUploadProcessor(esper.Processor):
         self.backend = backend
         self.stats = stats
         self.packer = ScenePacker(
-            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+            precision=backend.precision,
+            camera_relative=backend.camera_relative,
+            bvh_width=backend.bvh_width,
+            bvh_compact=backend.bvh_compact,
         )
 
     @property

@@ -9,7 +9,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import engine.bvh as bvh_mod
-from engine.bvh import Bvh, BvhParams, build_bvh, cached_bvh, clear_memory_cache, collapse, leaf_blocks
+from engine import layout
+from engine.bvh import (
+    Bvh,
+    BvhParams,
+    build_bvh,
+    cached_bvh,
+    clear_memory_cache,
+    collapse,
+    compact,
+    leaf_blocks,
+    offset_compact,
+)
 from engine.layout import BVH4_NODE_DTYPE, BVH_NODE_DTYPE
 
 # --- meshes ------------------------------------------------------------------
@@ -501,3 +512,137 @@ def test_wide_trees_are_cached_by_width(tmp_path, fresh_memory, monkeypatch):
     _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=4), wide)
     with pytest.raises(ValueError, match="width"):
         cached_bvh(verts, faces, cache_dir=tmp_path, width=3)
+
+
+# --- compact records (GLSL) ------------------------------------------------------------------------
+
+
+def _decodings(q: np.ndarray, origin: np.ndarray, scale: np.ndarray) -> list[np.ndarray]:
+    """``origin + q * scale`` as a float32 kernel may compute it: unfused, fused (one rounding), and
+    either with subnormals flushed to zero (inputs and result)."""
+    q32 = q.astype(np.float32)
+    tiny = np.finfo(np.float32).tiny
+
+    def ftz(x: np.ndarray) -> np.ndarray:
+        return np.where(np.abs(x) < tiny, np.float32(0), x).astype(np.float32)
+
+    out = []
+    for o, s in ((origin, scale), (ftz(origin), ftz(scale))):
+        with np.errstate(over="ignore"):
+            unfused = q32 * s + o
+            fused = (q32.astype(np.float64) * s.astype(np.float64) + o.astype(np.float64)).astype(np.float32)
+        out += [unfused, fused, ftz(unfused), ftz(fused)]
+    return out
+
+
+def _unpack(words: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(qlo, qhi) (N, 3) from a record's child.xyz words (N, 3)."""
+    w = words.view(np.uint32).astype(np.int64)
+    lo = np.stack([w[:, 0] & 0xFFFF, w[:, 0] >> 16, w[:, 1] & 0xFFFF], axis=1)
+    hi = np.stack([w[:, 1] >> 16, w[:, 2] & 0xFFFF, w[:, 2] >> 16], axis=1)
+    return lo, hi
+
+
+def check_compact(records: np.ndarray, binary: Bvh) -> None:
+    """Records mirror the binary tree: the header's frame and root link, each interior node's children's links,
+    and decoded child boxes that contain the exact ones however the kernel rounds."""
+    nodes = binary.nodes
+    shift = layout.BVH_LINK_SHIFT
+    origin = records["child0"][0, :3].copy().view(np.float32)
+    scale = records["child1"][0, :3].copy().view(np.float32)
+    assert records["child1"][0, 3] == -1 and (scale >= np.finfo(np.float32).tiny).all()
+    for top in _decodings(np.full(3, bvh_mod.GRID_MAX), origin, scale):
+        assert (top >= nodes["bounds_max"][0]).all() and (origin <= nodes["bounds_min"][0]).all()
+    inner = np.flatnonzero(nodes["count"] == 0)
+    assert len(records) == 1 + len(inner)
+    record_of = {int(node): 1 + r for r, node in enumerate(inner)}
+
+    def link(node: int) -> int:
+        if nodes["count"][node] == 0:
+            return record_of[node] << shift
+        return int(nodes["first"][node]) << shift | int(nodes["count"][node])
+
+    assert records["child0"][0, 3] == link(0)
+    for field, offset in (("child0", 0), ("child1", 1)):
+        kids = nodes["first"][inner] + offset
+        np.testing.assert_array_equal(records[field][1:, 3], [link(int(k)) for k in kids])
+        qlo, qhi = _unpack(records[field][1:, :3])
+        for lo in _decodings(qlo, origin, scale):
+            assert (lo <= nodes["bounds_min"][kids]).all(), field
+        for hi in _decodings(qhi, origin, scale):
+            assert (hi >= nodes["bounds_max"][kids]).all(), field
+
+
+@pytest.mark.parametrize("params", PARAMS, ids=["default", "leaf1-bins2", "leaf8-bins32"])
+@pytest.mark.parametrize("name", list(MESHES))
+def test_compact_records_mirror_the_tree_conservatively(name, params):
+    verts, faces = MESHES[name]()
+    binary = build_bvh(verts, faces, params)
+    check_compact(compact(binary), binary)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    corners=st.lists(
+        st.lists(st.lists(st.floats(-1e3, 1e3, width=32), min_size=3, max_size=3), min_size=3, max_size=3),
+        min_size=1,
+        max_size=40,
+    ),
+    offset=st.sampled_from([0.0, 1e-30, 1e-39, -1e-39, 3.0, -7e4, 1e6]),
+    leaf=st.integers(1, 4),
+)
+def test_compact_records_on_float_soups(corners, offset, leaf):
+    """Any float boxes, near or far from the origin (grid steps below an ulp there): still conservative."""
+    verts, faces = _from_corners(np.array(corners, np.float32) + np.float32(offset))
+    binary = build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=4))
+    check_compact(compact(binary), binary)
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi"),
+    [
+        ([-2e-38, 1e-40, -1e-40], [2e-40, 3e-40, 5e-39]),  # subnormal origins and decodings (flushed or not)
+        ([0.0, 0.0, 0.0], [1.0, 0.0, 2.0]),  # a flat axis: scale is the smallest normal, every q decodes to 0
+        ([1e-40, -1e-39, 0.0], [2e-40, 1e-39, 1e-45]),  # subnormal extents: never a subnormal scale
+        ([1000.0, -1000.0, 5.0], [1000.0001, -999.9999, 5.0000005]),  # extents of an ulp or two
+        ([-3e38, -1.0, 1e38], [3e38, 1.0, 3.4e38]),  # decoding overflows to +-inf: still conservative
+    ],
+)
+def test_compact_frame_and_boxes_at_the_edges(lo, hi):
+    rng = np.random.default_rng(3)
+    root_lo, root_hi = np.array(lo, np.float32), np.array(hi, np.float32)
+    origin, scale = bvh_mod.compact_frame(root_lo, root_hi)
+    assert (scale >= np.finfo(np.float32).tiny).all() and np.isfinite(scale).all()
+    # boxes inside the root box: random corners, the root's own bounds, and points on them
+    t = rng.uniform(size=(200, 2, 3))
+    pts = (root_lo.astype(np.float64) + t * (root_hi.astype(np.float64) - root_lo)).astype(np.float32)
+    pts = np.clip(pts, root_lo, root_hi)
+    box_lo = np.concatenate([pts.min(axis=1), [root_lo, root_hi, root_lo]])
+    box_hi = np.concatenate([pts.max(axis=1), [root_hi, root_hi, root_lo]])
+    qlo, qhi = bvh_mod.compact_boxes(box_lo, box_hi, origin, scale)
+    assert ((qlo >= 0) & (qhi <= bvh_mod.GRID_MAX) & (qlo <= qhi)).all()
+    for decoded in _decodings(qlo, origin, scale):
+        assert (decoded <= box_lo).all()
+    for decoded in _decodings(qhi, origin, scale):
+        assert (decoded >= box_hi).all()
+
+
+def test_compact_lone_leaf_and_links():
+    """A lone leaf is the header's root link; records need a binary tree; links carry offsets."""
+    verts, faces = _from_corners(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32))
+    lone = build_bvh(verts, faces)
+    records = compact(lone)
+    assert len(records) == 1 and records["child0"][0, 3] == (0 << layout.BVH_LINK_SHIFT | 1)
+    moved = offset_compact(records, node_base=10, tri_base=5)
+    assert moved["child0"][0, 3] == (5 << layout.BVH_LINK_SHIFT | 1) and moved["child1"][0, 3] == -1
+    verts, faces = MESHES["icosphere"]()
+    binary = build_bvh(verts, faces)
+    records = compact(binary)
+    moved = offset_compact(records, node_base=10, tri_base=5)
+    mask = (1 << layout.BVH_LINK_SHIFT) - 1
+    for field in ("child0", "child1"):
+        old, new = records[field][1:, 3], moved[field][1:, 3]
+        np.testing.assert_array_equal(new & mask, old & mask)
+        np.testing.assert_array_equal((new >> 7) - (old >> 7), np.where(old & mask == 0, 10, 5))
+    with pytest.raises(ValueError, match="binary"):
+        compact(collapse(binary))

@@ -77,6 +77,7 @@ class _Failing:
     precision = "f32"
     camera_relative = True
     bvh_width = 2
+    bvh_compact = False
 
     def upload(self, packed, updates):
         return 0

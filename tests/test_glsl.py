@@ -126,6 +126,7 @@ _TABLE_STRUCTS = {
     "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
     "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
+    "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
 }
 
 
@@ -161,6 +162,7 @@ _ACCESSORS = {
     "triangle_blocks": "TRIANGLE_BLOCK(i)",
     "camera": "CAMERA_ROW",
     "bvh4_nodes": "BVH_NODE(i)",
+    "bvh_compact_nodes": "BVH_NODE(i)",
 }
 
 
@@ -175,7 +177,8 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
     """
     backend = backend_factory("glsl", precision)
     struct = _TABLE_STRUCTS[table]
-    dtype = layout.BVH4_NODE_DTYPE if table == "bvh4_nodes" else layout.table_dtype(table, precision)
+    special = {"bvh4_nodes": layout.BVH4_NODE_DTYPE, "bvh_compact_nodes": layout.BVH_COMPACT_NODE_DTYPE}
+    dtype = special[table] if table in special else layout.table_dtype(table, precision)
     single = table in ("settings", "camera")  # the core reads row 0 only
     rows = _random_rows(dtype, 1 if single and store == "image" else 5, np.random.default_rng(7))
     stores, words = [], 0
@@ -194,9 +197,11 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
                 words += 2
     defines = {"REAL_IS_DOUBLE": int(precision == "f64")}
     if store == "image":
-        defines.update(backend._defines(()), TABLES_IN_IMAGES=1)
+        defines.update(backend._defines(()), TABLES_IN_IMAGES=1, BVH_WIDTH=2, BVH_COMPACT=0)  # whatever it last drew
         if table == "bvh4_nodes":
             defines.update(BVH_WIDTH=4, BVH_NODES_STRIDE=dtype.itemsize // 16)
+        if table == "bvh_compact_nodes":
+            defines.update(BVH_COMPACT=1, BVH_NODES_STRIDE=dtype.itemsize // 16)
         head = shared.read("bindings.glsl", "backends.glsl")
         read = f"{struct} record = {_ACCESSORS[table]};"
     else:
@@ -223,7 +228,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
         if store == "image":
             src = backend._image(len(rows) * dtype.itemsize // 16)
             _write_texels(src, 0, rows.view(np.uint32).reshape(-1, 4))
-            name = "bvh_nodes" if table == "bvh4_nodes" else table
+            name = "bvh_nodes" if table in special else table
             unit = CAMERA_IMAGE if table == "camera" else layout.TABLES.index(name) + 1
             src.bind_to_image(unit, read=True, write=False)
         else:

@@ -103,6 +103,20 @@ def test_bvh4_node_offsets() -> None:
         layout.bvh_width(np.zeros(3, layout.TRIANGLE_DTYPE))
 
 
+def test_bvh_compact_node_offsets() -> None:
+    """The compact binary record (bvh_nodes of ScenePacker(bvh_compact=True)): two int4s, 32 bytes."""
+    dtype = layout.BVH_COMPACT_NODE_DTYPE
+    assert dtype.itemsize == 32
+    assert {name: dtype.fields[name][1] for name in dtype.names} == {"child0": 0, "child1": 16}
+    assert all(dtype.fields[name][0].base == np.dtype(np.int32) for name in dtype.names)
+    nodes = np.zeros(3, dtype)
+    assert layout.bvh_width(nodes) == 2 and layout.bvh_compact(nodes)
+    assert not layout.bvh_compact(np.zeros(3, layout.BVH_NODE_DTYPE))
+    assert not layout.bvh_compact(np.zeros(3, layout.BVH4_NODE_DTYPE))
+    with pytest.raises(ValueError, match="not a BVH node table"):
+        layout.bvh_compact(np.zeros(3, layout.TRIANGLE_DTYPE))
+
+
 def test_precision_only_changes_real_tables() -> None:
     for table in ("settings", "triangles", "triangle_uvs", "bvh_nodes", "materials"):
         assert layout.table_dtype(table, "f32") == layout.table_dtype(table, "f64")

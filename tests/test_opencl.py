@@ -309,6 +309,7 @@ _TABLE_STRUCTS = {
     "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
     "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
+    "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
 }
 
 
@@ -337,7 +338,8 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
     import pyopencl as cl
 
     for table, struct in _TABLE_STRUCTS.items():
-        dtype = layout.BVH4_NODE_DTYPE if table == "bvh4_nodes" else layout.table_dtype(table, precision)
+        special = {"bvh4_nodes": layout.BVH4_NODE_DTYPE, "bvh_compact_nodes": layout.BVH_COMPACT_NODE_DTYPE}
+        dtype = special[table] if table in special else layout.table_dtype(table, precision)
         rows = _random_rows(dtype, 5, np.random.default_rng(7))
         stores, words = [], 0
         for kind, member in _members(struct):

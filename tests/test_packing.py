@@ -246,3 +246,48 @@ def test_reference_refuses_wide_trees():
     assert packer.packed is not None
     with pytest.raises(AberrantError, match="bvh_width=2"):
         ReferenceBackend().upload(packer.packed, updates)
+
+
+def test_compact_bvh_packing_links_every_asset():
+    """bvh_compact=True: each asset's records start with a header the instances point at; links are absolute;
+    the stack depth is the binary tree's; the reference refuses them; GLSL asks for them, OpenCL does not."""
+    from backends import shared
+    from backends.glsl.backend import GlslBackend
+    from backends.opencl.backend import OpenClBackend
+    from backends.reference.backend import ReferenceBackend
+    from engine import layout
+    from engine.errors import AberrantError
+
+    scene = small_scene()
+    scene.add_mesh("ball", "sphere", position=(0, 2, -3))
+    binary = ScenePacker(bvh_width=2)
+    binary.sync(scene)
+    packer = ScenePacker(bvh_compact=True)
+    updates = packer.sync(scene)
+    assert binary.packed is not None and packer.packed is not None
+    records, count = packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"]
+    assert records.dtype == layout.BVH_COMPACT_NODE_DTYPE
+    np.testing.assert_array_equal(packer.packed.tables["triangles"], binary.packed.tables["triangles"])
+    roots = np.unique(packer.packed.tables["instances"]["meta"][: packer.packed.counts["instances"], 0])
+    headers = np.flatnonzero(records["child1"][:count, 3] == -1)
+    np.testing.assert_array_equal(roots, headers)
+    assert len(headers) >= 2  # box and sphere: the second asset's links carry offsets
+    mask = (1 << layout.BVH_LINK_SHIFT) - 1
+    links = np.concatenate(
+        [records["child0"][:count, 3], records["child1"][:count, 3][records["child1"][:count, 3] >= 0]]
+    )
+    leaf, inner = links[links & mask > 0], links[links & mask == 0] >> layout.BVH_LINK_SHIFT
+    assert ((leaf >> layout.BVH_LINK_SHIFT) + (leaf & mask) <= packer.packed.counts["triangles"]).all()
+    assert ((inner < count) & ~np.isin(inner, headers)).all()
+    covered = np.concatenate([np.arange(k >> 7, (k >> 7) + (k & mask)) for k in leaf])
+    np.testing.assert_array_equal(np.sort(covered), np.arange(packer.packed.counts["triangles"]))
+    nodes = binary.packed.tables["bvh_nodes"]
+    assert shared.bvh_depth(records, count) == shared.bvh_depth(nodes, binary.packed.counts["bvh_nodes"])
+    assert shared.bvh_defines(records, count)["BVH_COMPACT"] == 1
+    assert shared.bvh_defines(nodes, binary.packed.counts["bvh_nodes"])["BVH_COMPACT"] == 0
+    with pytest.raises(AberrantError, match="bvh_compact=False"):
+        ReferenceBackend().upload(packer.packed, updates)
+    with pytest.raises(ValueError, match="bvh_compact"):
+        ScenePacker(bvh_width=4, bvh_compact=True)
+    assert GlslBackend.bvh_compact and GlslBackend.bvh_width == 2
+    assert not OpenClBackend.bvh_compact and not ReferenceBackend.bvh_compact

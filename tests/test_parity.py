@@ -114,10 +114,16 @@ FAR_CASES = ["starter", "random-boxes"]
 # --- rendering ------------------------------------------------------------------------------------
 
 
-def render(backend, scene: Scene, size: tuple[int, int], bvh_width: int | None = None) -> Frame:
-    """Pack for ``backend`` (camera-relative or not; its BVH width unless given), upload, render every AOV."""
+def render(
+    backend, scene: Scene, size: tuple[int, int], bvh_width: int | None = None, bvh_compact: bool | None = None
+) -> Frame:
+    """Pack for ``backend`` (camera-relative or not; its BVH width and compactness unless given), upload,
+    render every AOV."""
     width = backend.bvh_width if bvh_width is None else bvh_width
-    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=width)
+    compact = (backend.bvh_compact and width == 2) if bvh_compact is None else bvh_compact
+    packer = ScenePacker(
+        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=width, bvh_compact=compact
+    )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
@@ -276,7 +282,7 @@ def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, preci
     scene = CASES[case].build(assets)
     saved = dict(backend.extra_defines)
     try:
-        binary = render(backend, scene, CASES[case].size, bvh_width=2)
+        binary = render(backend, scene, CASES[case].size, bvh_width=2, bvh_compact=False)
         wide = render(backend, scene, CASES[case].size, bvh_width=4)
         assert backend._bvh["BVH_WIDTH"] == 4
         backend.extra_defines = {**saved, "BRUTE_FORCE": 1}
@@ -287,4 +293,29 @@ def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, preci
     assert (binary.instance >= 0).mean() > 0.3
     for name in AOVS:
         np.testing.assert_array_equal(wide.aov(name), binary.aov(name), err_msg=name)
+        np.testing.assert_array_equal(brute.aov(name), binary.aov(name), err_msg=name)
+
+
+@pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "watertight-vertices", "random-boxes"])
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_compact_bvh_renders_the_same(backend_factory, assets, backend_name, precision, case):
+    """Compact records (16-bit grid boxes, conservative) give frames bit-identical to the binary tree's:
+    looser boxes only visit more, the triangle test and its tie rule are unchanged; brute force through
+    their links too."""
+    backend = backend_factory(backend_name, precision)
+    scene = CASES[case].build(assets)
+    saved = dict(backend.extra_defines)
+    try:
+        binary = render(backend, scene, CASES[case].size, bvh_width=2, bvh_compact=False)
+        assert backend._bvh["BVH_COMPACT"] == 0
+        compact = render(backend, scene, CASES[case].size, bvh_width=2, bvh_compact=True)
+        assert backend._bvh["BVH_COMPACT"] == 1
+        backend.extra_defines = {**saved, "BRUTE_FORCE": 1}
+        brute = render(backend, scene, CASES[case].size, bvh_width=2, bvh_compact=True)
+    finally:
+        backend.extra_defines = saved
+        scene.close()
+    assert (binary.instance >= 0).mean() > 0.3
+    for name in AOVS:
+        np.testing.assert_array_equal(compact.aov(name), binary.aov(name), err_msg=name)
         np.testing.assert_array_equal(brute.aov(name), binary.aov(name), err_msg=name)

@@ -451,6 +451,7 @@ def test_packer_follows_the_backend_configuration(make_scene):
         precisions = ("f64",)
         camera_relative = False
         bvh_width = 4
+        bvh_compact = False
 
     scene = make_scene(position=(100.0, 0.0, 0.0))
     scene.add_mesh("box", "box")

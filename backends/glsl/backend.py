@@ -101,6 +101,8 @@ class GlslBackend(Backend):
     name: ClassVar[str] = "glsl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
     camera_relative: ClassVar[bool] = True
+    #: Compact records: a visit loads 2 texels instead of 4 (llvmpipe gathers texels at a bounded rate).
+    bvh_compact: ClassVar[bool] = True
 
     #: Process-wide probe result: ``(reason,)`` once probed.
     _probe_cache: ClassVar[tuple[str | None] | None] = None
@@ -143,7 +145,7 @@ class GlslBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._features = Features()
-        self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
+        self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
         self._uploaded = False
         with self._current():

@@ -88,6 +88,15 @@ Bvh4Node fetch_bvh_node_(int i)
     n.count = I4_AT_(bvh_nodes_img, b + 7);
     return n;
 }
+#elif BVH_COMPACT
+BvhCompactNode fetch_bvh_node_(int i)
+{
+    int b = i * BVH_NODES_STRIDE;
+    BvhCompactNode n;
+    n.child0 = I4_AT_(bvh_nodes_img, b);
+    n.child1 = I4_AT_(bvh_nodes_img, b + 1);
+    return n;
+}
 #else
 BvhNode fetch_bvh_node_(int i)
 {

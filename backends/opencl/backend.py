@@ -232,7 +232,7 @@ class OpenClBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._features = Features()
-        self._bvh = {"BVH_WIDTH": 2, "BVH_STACK_SIZE": shared.MIN_STACK}
+        self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
         self._uploaded = False
         mf = cl.mem_flags

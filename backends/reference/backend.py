@@ -16,7 +16,7 @@ from backends.reference.trace import Space, TraceResult, trace
 from backends.reference.traverse import Geometry
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
-from engine.layout import Precision, bvh_width
+from engine.layout import Precision, bvh_compact, bvh_width
 from engine.packing import Features, PackedScene, TableUpdate
 
 #: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
@@ -56,9 +56,10 @@ class ReferenceBackend(Backend):
 
     def upload(self, packed: PackedScene, updates: Sequence[TableUpdate]) -> int:
         """Copy the changed tables (or rows), as a device upload would; returns the bytes moved."""
-        if bvh_width(packed.tables["bvh_nodes"]) != self.bvh_width:
+        if bvh_width(packed.tables["bvh_nodes"]) != self.bvh_width or bvh_compact(packed.tables["bvh_nodes"]):
             raise AberrantError(
-                f"reference backend traverses binary BVHs; pack with bvh_width={self.bvh_width} (ScenePacker)"
+                f"reference backend traverses binary BVHs; pack with bvh_width={self.bvh_width}, bvh_compact=False"
+                " (ScenePacker)"
             )
         updates = list(updates)
         for u in updates:

@@ -65,6 +65,17 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
     nodes = nodes[:count]
     if count == 0:
         return 0
+    if layout.bvh_compact(nodes):  # from each header's root link, through the interior records' links
+        link0, link1 = nodes["child0"][:, 3].astype(np.int64), nodes["child1"][:, 3].astype(np.int64)
+        mask = (1 << layout.BVH_LINK_SHIFT) - 1
+        frontier = link0[link1 == -1]
+        depth = 0
+        while frontier.size and depth <= count:
+            depth += 1
+            inner = frontier[(frontier >= 0) & (frontier & mask == 0)] >> layout.BVH_LINK_SHIFT
+            inner = inner[inner < count]
+            frontier = np.concatenate([link0[inner], link1[inner]])
+        return depth
     if layout.bvh_width(nodes) == 4:  # wide nodes only: their leaves live in their slots
         child, kind = nodes["child"].astype(np.int64), nodes["count"]
         is_child = np.zeros(count, bool)
@@ -108,8 +119,13 @@ def stack_size(nodes: np.ndarray, count: int) -> int:
 
 
 def bvh_defines(nodes: np.ndarray, count: int) -> dict[str, int]:
-    """The defines a ``bvh_nodes`` table asks for: ``BVH_WIDTH`` (from its dtype) and ``BVH_STACK_SIZE``."""
-    return {"BVH_WIDTH": layout.bvh_width(nodes), "BVH_STACK_SIZE": stack_size(nodes, count)}
+    """The defines a ``bvh_nodes`` table asks for, from its dtype: ``BVH_WIDTH``, ``BVH_COMPACT``; and
+    ``BVH_STACK_SIZE``."""
+    return {
+        "BVH_WIDTH": layout.bvh_width(nodes),
+        "BVH_COMPACT": int(layout.bvh_compact(nodes)),
+        "BVH_STACK_SIZE": stack_size(nodes, count),
+    }
 
 
 #: The smallest top-level (instance) traversal stack compiled; deeper trees get more, in steps of 8.

@@ -19,9 +19,9 @@
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
- *               BVH_NODE(i) (a BvhNode, or a Bvh4Node with BVH_WIDTH 4), INSTANCE(i),
- *               MATERIAL(i), ABERRATION(i), PORTAL(i), TLAS_NODE(i), TRIANGLE_BLOCK(i)
- *               (records, from the bindings file)
+ *               BVH_NODE(i) (a BvhNode, a BvhCompactNode with BVH_COMPACT, or a Bvh4Node
+ *               with BVH_WIDTH 4), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i),
+ *               TLAS_NODE(i), TRIANGLE_BLOCK(i) (records, from the bindings file)
  *
  * Compile-time defines (engine.packing.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
@@ -38,6 +38,8 @@
  *   BVH_WIDTH          2: binary nodes, one triangle at a time; 4: 4-wide nodes (child boxes SoA,
  *                      slabbed with 4-vector ops) whose leaves are blocks of 4 triangles tested at
  *                      once (layout.h; the packer's bvh_width, from the table's dtype)
+ *   BVH_COMPACT        1 with BVH_WIDTH 2: compact records, both children's boxes (16-bit grid) and
+ *                      links in one 32-byte record (the packer's bvh_compact; GLSL on llvmpipe)
  *   USE_TLAS           find instances through the top-level tree (tlas_nodes), not a loop over all
  *   TLAS_STACK_SIZE    its traversal stack; the host sizes it to the tree's depth
  *
@@ -440,6 +442,17 @@ FORCE_INLINE MeshHit test_block(SCENE_DECL MeshHit best, ShearedRay sr, int b, i
     }
 #endif
 
+#if BVH_COMPACT
+/* Entry and exit t of a compact record's child box (16-bit grid coordinates c.xyz, see layout.h),
+ * decoded in float as the host rounded it: origin + q * scale, fused or not, contains the box. */
+FORCE_INLINE real2 compact_slab(int4 c, float3 origin, float3 scale, real3 o, real3 inv)
+{
+    float3 qlo = F3(TO_FLOAT(c.x & 0xffff), TO_FLOAT((c.x >> 16) & 0xffff), TO_FLOAT(c.y & 0xffff));
+    float3 qhi = F3(TO_FLOAT((c.y >> 16) & 0xffff), TO_FLOAT(c.z & 0xffff), TO_FLOAT((c.z >> 16) & 0xffff));
+    return slab(o, inv, TO_REAL3(origin + qlo * scale), TO_REAL3(origin + qhi * scale));
+}
+#endif
+
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
  * asset's BVH from its root, nearest child first, with a small stack. */
@@ -475,6 +488,22 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
             end = TRIANGLE_BLOCK(c).index.x + n; /* the leaf's blocks hold its n consecutive rows */
         }
     }
+    for (int k = begin; k < end; ++k) {
+        best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+    }
+    return best;
+#elif BRUTE_FORCE && BVH_COMPACT
+    /* As below, through the links: leftmost leaf's first to rightmost leaf's end. */
+    int link = BVH_NODE(root).child0.w;
+    while ((link & BVH_LINK_MASK) == 0) {
+        link = BVH_NODE(link >> BVH_LINK_SHIFT).child0.w;
+    }
+    int begin = link >> BVH_LINK_SHIFT;
+    link = BVH_NODE(root).child0.w;
+    while ((link & BVH_LINK_MASK) == 0) {
+        link = BVH_NODE(link >> BVH_LINK_SHIFT).child1.w;
+    }
+    int end = (link >> BVH_LINK_SHIFT) + (link & BVH_LINK_MASK);
     for (int k = begin; k < end; ++k) {
         best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
     }
@@ -539,6 +568,72 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
                 best = test_block(SCENE_PASS best, sr, b, row, cull, t_min);
             }
             BVH_POP()
+        }
+    }
+    return best;
+#elif BVH_COMPACT
+    /* The binary tree's traversal (below) over compact records: one record holds both children's
+     * boxes and links, so a visit loads 2 texels (not 2 nodes of 2) and a pop none; the stack holds
+     * links. The boxes are conservative, so the same triangles can win: the hit is the same. */
+    real3 inv = safe_inverse(dd);
+    BvhCompactNode header = BVH_NODE(root);
+    float3 origin = F3(AS_FLOAT(header.child0.x), AS_FLOAT(header.child0.y), AS_FLOAT(header.child0.z));
+    float3 scale = F3(AS_FLOAT(header.child1.x), AS_FLOAT(header.child1.y), AS_FLOAT(header.child1.z));
+    float3 top = origin + TO_FLOAT(BVH_GRID_MAX) * scale;
+    if (!slab_hit(slab(oo, inv, TO_REAL3(origin), TO_REAL3(top)), t_min, best.t)) {
+        return best;
+    }
+    int stack_link[BVH_STACK_SIZE];
+    real stack_t[BVH_STACK_SIZE];
+    int sp = 0;
+    bool done = false;
+    int link = header.child0.w;
+    int first = link >> BVH_LINK_SHIFT;
+    int count = link & BVH_LINK_MASK;
+    while (!done) {
+        while (count == 0 && !done) {
+            BvhCompactNode node = BVH_NODE(first);
+            real2 h0 = compact_slab(node.child0, origin, scale, oo, inv);
+            real2 h1 = compact_slab(node.child1, origin, scale, oo, inv);
+            bool hit0 = slab_hit(h0, t_min, best.t);
+            bool hit1 = slab_hit(h1, t_min, best.t);
+            if (hit0 || hit1) {
+                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
+                if (hit0 && hit1 && sp < BVH_STACK_SIZE) {
+                    stack_link[sp] = second_first ? node.child0.w : node.child1.w;
+                    stack_t[sp] = second_first ? h0.x : h1.x;
+                    sp += 1;
+                }
+                link = second_first ? node.child1.w : node.child0.w;
+            } else {
+                bool found = false;
+                while (sp > 0 && !found) {
+                    sp -= 1;
+                    if (stack_t[sp] <= best.t) {
+                        link = stack_link[sp];
+                        found = true;
+                    }
+                }
+                done = !found;
+            }
+            first = link >> BVH_LINK_SHIFT;
+            count = link & BVH_LINK_MASK;
+        }
+        if (!done) {
+            for (int k = first; k < first + count; ++k) {
+                best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
+            }
+            bool found = false;
+            while (sp > 0 && !found) {
+                sp -= 1;
+                if (stack_t[sp] <= best.t) {
+                    link = stack_link[sp];
+                    found = true;
+                }
+            }
+            done = !found;
+            first = link >> BVH_LINK_SHIFT;
+            count = link & BVH_LINK_MASK;
         }
     }
     return best;

@@ -55,12 +55,31 @@ STRUCT_BEGIN(Bvh4Node)
     int4 count;
 STRUCT_END(Bvh4Node)
 
-/* The record of the bvh_nodes table: BVH_WIDTH (2 or 4) is the packer's bvh_width. */
+/* bvh_nodes with BVH_COMPACT: an interior node as both children's boxes, 16-bit grid coordinates
+ * over the asset's frame in child{i}.xyz (lo.x | lo.y << 16, lo.z | hi.x << 16, hi.y | hi.z << 16),
+ * decoded origin + q * scale; child{i}.w a link (index << BVH_LINK_SHIFT | count): count > 0, a leaf
+ * of triangles [index, index + count); count == 0, the record index. An asset's first record is a
+ * header: child0 = (origin bits, root link), child1 = (scale bits, -1). */
+STRUCT_BEGIN(BvhCompactNode)
+    int4 child0;
+    int4 child1;
+STRUCT_END(BvhCompactNode)
+#define BVH_LINK_SHIFT 7
+#define BVH_LINK_MASK 127
+#define BVH_GRID_MAX 65535
+
+/* The record of the bvh_nodes table: BVH_WIDTH (2 or 4) is the packer's bvh_width, BVH_COMPACT its
+ * bvh_compact. */
 #ifndef BVH_WIDTH
 #define BVH_WIDTH 2
 #endif
+#ifndef BVH_COMPACT
+#define BVH_COMPACT 0
+#endif
 #if BVH_WIDTH == 4
 #define BvhRow Bvh4Node
+#elif BVH_COMPACT
+#define BvhRow BvhCompactNode
 #else
 #define BvhRow BvhNode
 #endif

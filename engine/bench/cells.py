@@ -139,6 +139,7 @@ class CellRunner:
                 camera_relative=backend.camera_relative,
                 bvh_params=BvhParams(max_leaf_size=setting.leaf),
                 bvh_width=backend.bvh_width,
+                bvh_compact=backend.bvh_compact,
             )
             start = time.perf_counter()
             updates = packer.sync(scene, camera.position)
@@ -212,6 +213,7 @@ class CellRunner:
                 camera_relative=other.camera_relative,
                 bvh_params=params,
                 bvh_width=other.bvh_width,
+                bvh_compact=other.bvh_compact,
             )
             updates = packer.sync(baseline, camera.position)
             assert packer.packed is not None

@@ -89,7 +89,10 @@ def render_reference(scene: Scene, camera: CameraView, size: tuple[int, int]) ->
     start = time.perf_counter()
     with ReferenceBackend() as backend:
         packer = ScenePacker(
-            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
+            precision=backend.precision,
+            camera_relative=backend.camera_relative,
+            bvh_width=backend.bvh_width,
+            bvh_compact=backend.bvh_compact,
         )
         updates = packer.sync(scene, camera.position)
         assert packer.packed is not None
