@@ -2,9 +2,9 @@
 
 The tree is stored in :data:`engine.layout.BVH_NODE_DTYPE`, the exact bytes the
 kernels traverse. Indices are relative to the asset; the packer adds offsets.
-:func:`collapse` turns it into a 4-wide tree (:data:`engine.layout.BVH4_NODE_DTYPE`)
-for tracers that test four boxes at once with 4-vector operations; the wide tree
-has the same leaves, so the triangles' order is the binary tree's. :func:`compact`
+:func:`collapse` turns it into a 4- or 8-wide tree (:data:`engine.layout.BVH4_NODE_DTYPE`,
+:data:`engine.layout.BVH8_NODE_DTYPE`) for tracers that test four or eight boxes at once with
+vector operations; a wide tree has the same leaves, so the triangles' order is the binary tree's. :func:`compact`
 packs a binary tree as :data:`engine.layout.BVH_COMPACT_NODE_DTYPE` records (both
 children's boxes on a 16-bit grid, conservative) for GLSL, where texel loads bound
 the traversal.
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from engine.layout import BVH4_NODE_DTYPE, BVH_COMPACT_NODE_DTYPE, BVH_LINK_SHIFT, BVH_NODE_DTYPE, BVH_WIDTHS
+from engine.layout import BVH_COMPACT_NODE_DTYPE, BVH_LINK_SHIFT, BVH_NODE_DTYPE, BVH_WIDTHS
 
 __all__ = [
     "BUILDER_VERSION",
@@ -102,15 +102,15 @@ class Bvh:
 
     @property
     def width(self) -> int:
-        """Children per node: 2 (:data:`BVH_NODE_DTYPE`) or 4 (:data:`BVH4_NODE_DTYPE`)."""
-        return 4 if self.nodes.dtype == BVH4_NODE_DTYPE else 2
+        """Children per node: 2 (:data:`BVH_NODE_DTYPE`), 4 or 8 (the wide dtypes of :data:`BVH_WIDTHS`)."""
+        return next(w for w, dtype in BVH_WIDTHS.items() if self.nodes.dtype == dtype)
 
     def depth(self) -> int:
         """Number of nodes on the longest root-to-leaf path (a lone binary leaf has depth 1).
 
         A wide tree counts wide nodes only (its leaves live in its nodes' slots).
         """
-        if self.width == 4:
+        if self.width > 2:
             child, count = self.nodes["child"], self.nodes["count"]
             frontier, depth = np.zeros(1, np.int64), 0
             while frontier.size:
@@ -128,17 +128,17 @@ class Bvh:
     def sah_cost(self) -> float:
         """SAH cost relative to the root's area: traversal_cost per inner node, 1 per triangle test.
 
-        The same formula for both widths (a wide node costs what a binary one does), so collapsing
+        The same formula for every width (a wide node costs what a binary one does), so collapsing
         can only lower it: each binary node pulled into its parent takes its term away.
         """
-        if self.width == 4:
-            n = self.nodes
+        if self.width > 2:
+            n, w = self.nodes, self.width
             lo = np.stack([n["lo_x"], n["lo_y"], n["lo_z"]]).reshape(3, -1)
             hi = np.stack([n["hi_x"], n["hi_y"], n["hi_z"]]).reshape(3, -1)
             count = n["count"].reshape(-1)
             used = count >= 0
             lo, hi, count = lo[:, used], hi[:, used], count[used]
-            root = _half_area(lo[:, : int(used[:4].sum())].min(axis=1), hi[:, : int(used[:4].sum())].max(axis=1))
+            root = _half_area(lo[:, : int(used[:w].sum())].min(axis=1), hi[:, : int(used[:w].sum())].max(axis=1))
             area = _half_area(lo, hi)
             rel = area / root if np.isfinite(root) and root > 0 else np.ones_like(area)
             inner = count == 0
@@ -316,9 +316,10 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     return _frozen(nodes, order.astype(np.int32), params)
 
 
-def collapse(bvh: Bvh) -> Bvh:
-    """The 4-wide tree of a binary one: each wide node takes a binary node's two children, then pulls
-    up the children of its largest-area inner child until it has four (or only leaves).
+def collapse(bvh: Bvh, width: int = 4) -> Bvh:
+    """The ``width``-wide tree (4 or 8) of a binary one: each wide node takes a binary node's two
+    children, then pulls up the children of its largest-area inner child until it has ``width`` (or
+    only leaves).
 
     Every pull removes one binary node and its SAH term (largest area first: the dearest to visit);
     leaves and the triangles' order are unchanged. Level-synchronous like the builder: a few array
@@ -326,22 +327,26 @@ def collapse(bvh: Bvh) -> Bvh:
     """
     if bvh.width != 2:
         raise ValueError(f"collapse takes a binary tree, got width {bvh.width}")
+    if width not in BVH_WIDTHS or width == 2:
+        raise ValueError(f"collapse builds widths {sorted(w for w in BVH_WIDTHS if w > 2)}, got {width!r}")
     b = bvh.nodes
     first, count = b["first"].astype(np.int64), b["count"].astype(np.int64)
     inner = count == 0
     area = _half_area(b["bounds_min"].T, b["bounds_max"].T)
-    rows: list[np.ndarray] = []  # per level: (F, 4) binary node ids in the slots, -1 empty
+    rows: list[np.ndarray] = []  # per level: (F, width) binary node ids in the slots, -1 empty
     frontier = np.zeros(1, np.int64)
     if not inner[0]:  # a lone leaf: one wide node holding it
-        rows.append(np.array([[0, -1, -1, -1]], np.int64))
+        lone = np.full((1, width), -1, np.int64)
+        lone[0, 0] = 0
+        rows.append(lone)
         frontier = frontier[:0]
-    col = np.arange(4)
+    col = np.arange(width)
     while frontier.size:
         f = frontier.size
-        slots = np.full((f, 4), -1, np.int64)
+        slots = np.full((f, width), -1, np.int64)
         slots[:, 0], slots[:, 1] = first[frontier], first[frontier] + 1
         r = np.arange(f)
-        for used in (2, 3):
+        for used in range(2, width):
             safe = np.maximum(slots, 0)
             pullable = (slots >= 0) & inner[safe]
             pick = np.argmax(np.where(pullable, area[safe], -1.0), axis=1)
@@ -362,35 +367,40 @@ def collapse(bvh: Bvh) -> Bvh:
     wide_id = np.zeros(slots.shape, np.int64)
     wide_id[wide_inner] = np.arange(1, int(wide_inner.sum()) + 1)
     safe = np.maximum(slots, 0)
-    nodes = np.zeros(len(slots), BVH4_NODE_DTYPE)
+    nodes = np.zeros(len(slots), BVH_WIDTHS[width])
     empty = slots < 0
+
+    def put(field: str, values: np.ndarray) -> None:
+        # Width 8 stores each 8-lane field as two 4-vector rows (the bytes of a float8 / int8).
+        nodes[field] = values.reshape(nodes[field].shape)
+
     for k, axis in enumerate("xyz"):
-        nodes[f"lo_{axis}"] = np.where(empty, 0.0, b["bounds_min"][safe, k])
-        nodes[f"hi_{axis}"] = np.where(empty, 0.0, b["bounds_max"][safe, k])
-    nodes["child"] = np.where(empty, 0, np.where(wide_inner, wide_id, first[safe]))
-    nodes["count"] = np.where(empty, -1, count[safe])
+        put(f"lo_{axis}", np.where(empty, 0.0, b["bounds_min"][safe, k]))
+        put(f"hi_{axis}", np.where(empty, 0.0, b["bounds_max"][safe, k]))
+    put("child", np.where(empty, 0, np.where(wide_inner, wide_id, first[safe])))
+    put("count", np.where(empty, -1, count[safe]))
     return _frozen(nodes, bvh.triangle_order.copy(), bvh.params)
 
 
-def leaf_blocks(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
-    """Blocks of 4 triangles for a wide tree's leaves: ``(lanes, child)``.
+def leaf_blocks(bvh: Bvh, block: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Blocks of ``block`` triangles for a wide tree's leaves: ``(lanes, child)``.
 
-    ``lanes`` (B, 4): each block's triangle rows (relative to the asset, -1 for padding), a leaf's
+    ``lanes`` (B, block): each block's triangle rows (relative to the asset, -1 for padding), a leaf's
     blocks consecutive, leaves in node order; ``child``: the nodes' ``child`` with each leaf slot
     pointing at its first block instead of its first triangle (counts unchanged).
     """
-    if bvh.width != 4:
-        raise ValueError("triangle blocks are for 4-wide trees")
+    if bvh.width == 2:
+        raise ValueError("triangle blocks are for wide trees (width 4 or 8)")
     count = bvh.nodes["count"].reshape(-1).astype(np.int64)
     first = bvh.nodes["child"].reshape(-1).astype(np.int64)
     leaf = count > 0
-    nblocks = (count[leaf] + 3) // 4
+    nblocks = (count[leaf] + block - 1) // block
     start = np.cumsum(nblocks) - nblocks
     child = first.copy()
     child[leaf] = start
     owner = np.repeat(np.arange(nblocks.size), nblocks)  # the leaf of each block
     j = np.arange(owner.size) - start[owner]  # block number inside its leaf
-    offset = 4 * j[:, None] + np.arange(4)[None, :]
+    offset = block * j[:, None] + np.arange(block)[None, :]
     lanes = np.where(offset < count[leaf][owner][:, None], first[leaf][owner][:, None] + offset, -1)
     return lanes.astype(np.int32), child.reshape(bvh.nodes["child"].shape).astype(np.int32)
 
@@ -597,7 +607,7 @@ def cached_bvh(
     cache_dir: Path | None = None,
     width: int = 2,
 ) -> Bvh:
-    """:func:`build_bvh` (then :func:`collapse` for ``width=4``) behind an in-process and an on-disk
+    """:func:`build_bvh` (then :func:`collapse` for ``width`` 4 or 8) behind an in-process and an on-disk
     cache keyed by content, parameters and width."""
     if width not in BVH_WIDTHS:
         raise ValueError(f"BVH width must be one of {sorted(BVH_WIDTHS)}, got {width!r}")
@@ -614,7 +624,10 @@ def cached_bvh(
         except Exception as exc:  # a corrupt or foreign file is only a cache miss
             log.debug("rebuilding BVH: cannot use cache file %s (%s)", path, exc)
     if bvh is None:
-        bvh = build_bvh(verts, tris, params) if width == 2 else collapse(cached_bvh(verts, tris, params, cache_dir))
+        if width == 2:
+            bvh = build_bvh(verts, tris, params)
+        else:
+            bvh = collapse(cached_bvh(verts, tris, params, cache_dir), width)
         try:
             _save(path, key, bvh)
         except OSError as exc:

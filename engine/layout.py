@@ -13,11 +13,11 @@ Two families exist:
   ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``):
   always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
-  may traverse them. ``bvh_nodes`` has one of three dtypes, chosen by the
+  may traverse them. ``bvh_nodes`` has one of four dtypes, chosen by the
   packer's ``bvh_width`` and ``bvh_compact`` (the backend's): binary
-  :data:`BVH_NODE_DTYPE`, compact binary :data:`BVH_COMPACT_NODE_DTYPE` (GLSL), or
-  4-wide :data:`BVH4_NODE_DTYPE`, whose leaves name rows of
-  ``triangle_blocks`` (empty with binary trees).
+  :data:`BVH_NODE_DTYPE`, compact binary :data:`BVH_COMPACT_NODE_DTYPE` (GLSL),
+  4-wide :data:`BVH4_NODE_DTYPE` or 8-wide :data:`BVH8_NODE_DTYPE` (OpenCL
+  only), whose leaves name rows of ``triangle_blocks`` (empty with binary trees).
 * real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
   their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
@@ -135,8 +135,26 @@ BVH_COMPACT_NODE_DTYPE = _build([("child0", "int4", 1), ("child1", "int4", 1)], 
 #: Bits of a compact link below its index: leaf counts up to 64 (``BvhParams.max_leaf_size``).
 BVH_LINK_SHIFT = 7
 
+#: An 8-wide BVH node (``ScenePacker(bvh_width=8)``, OpenCL only: GLSL has no 8-vectors), 256 bytes:
+#: :data:`BVH4_NODE_DTYPE` with eight lanes, each field two 4-vector rows (row 0 = lanes 0-3), which
+#: are the bytes of the ``float8`` / ``int8`` the kernel reads (32-byte aligned: every offset is a
+#: multiple of 32). Leaves name ``ceil(count / 4)`` rows of ``triangle_blocks``, as with width 4.
+BVH8_NODE_DTYPE = _build(
+    [
+        ("lo_x", "float4", 2),
+        ("lo_y", "float4", 2),
+        ("lo_z", "float4", 2),
+        ("hi_x", "float4", 2),
+        ("hi_y", "float4", 2),
+        ("hi_z", "float4", 2),
+        ("child", "int4", 2),
+        ("count", "int4", 2),
+    ],
+    "f32",
+)
+
 #: The ``bvh_nodes`` dtype of each supported BVH width.
-BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE}
+BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE, 8: BVH8_NODE_DTYPE}
 
 
 def bvh_width(nodes: np.ndarray) -> int:

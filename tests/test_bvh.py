@@ -21,7 +21,7 @@ from engine.bvh import (
     leaf_blocks,
     offset_compact,
 )
-from engine.layout import BVH4_NODE_DTYPE, BVH_NODE_DTYPE
+from engine.layout import BVH4_NODE_DTYPE, BVH8_NODE_DTYPE, BVH_NODE_DTYPE
 
 # --- meshes ------------------------------------------------------------------
 
@@ -395,17 +395,23 @@ def test_bad_params_are_refused(kwargs, field):
         BvhParams(**kwargs)
 
 
-# --- the 4-wide tree (collapse) and its triangle blocks --------------------------------
+# --- the 4- and 8-wide trees (collapse) and their triangle blocks ----------------------
+
+WIDE = [4, 8]
 
 
-def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray) -> None:
+def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray, width: int = 4) -> None:
     """Every triangle in exactly one leaf slot, every wide node reached once, child boxes hold their subtree."""
     nodes, m = wide.nodes, len(faces)
-    assert nodes.dtype == BVH4_NODE_DTYPE and wide.width == 4
+    assert nodes.dtype == {4: BVH4_NODE_DTYPE, 8: BVH8_NODE_DTYPE}[width] and wide.width == width
     np.testing.assert_array_equal(wide.triangle_order, binary.triangle_order)
-    lo = np.stack([nodes["lo_x"], nodes["lo_y"], nodes["lo_z"]], axis=-1)  # (N, 4, 3)
-    hi = np.stack([nodes["hi_x"], nodes["hi_y"], nodes["hi_z"]], axis=-1)
-    child, count = nodes["child"].astype(np.int64), nodes["count"].astype(np.int64)
+
+    def lanes(field: str) -> np.ndarray:  # (N, width): width 8 stores two 4-vector rows per field
+        return nodes[field].reshape(len(nodes), width)
+
+    lo = np.stack([lanes("lo_x"), lanes("lo_y"), lanes("lo_z")], axis=-1)  # (N, width, 3)
+    hi = np.stack([lanes("hi_x"), lanes("hi_y"), lanes("hi_z")], axis=-1)
+    child, count = lanes("child").astype(np.int64), lanes("count").astype(np.int64)
     assert (count[:, 0] >= 0).all(), "slot 0 is never empty"
     used = count >= 0
     assert (used[:, 1:] <= used[:, :-1]).all(), "empty slots come last"
@@ -417,7 +423,7 @@ def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray) -> 
         """Visit node i; returns the exact bounds of the triangles under it."""
         visits[i] += 1
         box_lo, box_hi = np.full(3, np.inf, np.float32), np.full(3, -np.inf, np.float32)
-        for s in range(4):
+        for s in range(width):
             if count[i, s] < 0:
                 continue
             if count[i, s] > 0:
@@ -441,13 +447,14 @@ def check_wide(wide: Bvh, binary: Bvh, verts: np.ndarray, faces: np.ndarray) -> 
     assert wide.depth() <= binary.depth()
 
 
+@pytest.mark.parametrize("width", WIDE)
 @pytest.mark.parametrize("params", PARAMS, ids=["default", "leaf1-bins2", "leaf8-bins32"])
 @pytest.mark.parametrize("name", list(MESHES))
-def test_collapse_to_four_wide(name, params):
+def test_collapse_to_wide(name, params, width):
     verts, faces = MESHES[name]()
     binary = build_bvh(verts, faces, params)
-    wide = collapse(binary)
-    check_wide(wide, binary, verts, faces)
+    wide = collapse(binary, width)
+    check_wide(wide, binary, verts, faces, width)
     if len(binary.nodes) > 1:  # a lone leaf gains a root node; otherwise pulling nodes up only removes terms
         assert wide.sah_cost() <= binary.sah_cost() + 1e-9
     if len(binary.nodes) >= 7:  # enough nodes to pull: the wide tree is strictly cheaper and shallower
@@ -463,11 +470,12 @@ def test_collapse_to_four_wide(name, params):
         max_size=60,
     ),
     leaf=st.integers(1, 5),
+    width=st.sampled_from(WIDE),
 )
-def test_collapse_on_small_integer_soups(corners, leaf):
+def test_collapse_on_small_integer_soups(corners, leaf, width):
     verts, faces = _from_corners(np.array(corners, np.float32) * 0.5)
     binary = build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=4))
-    check_wide(collapse(binary), binary, verts, faces)
+    check_wide(collapse(binary, width), binary, verts, faces, width)
 
 
 def test_collapse_fills_nodes_and_pulls_the_largest_child():
@@ -479,11 +487,25 @@ def test_collapse_fills_nodes_and_pulls_the_largest_child():
     assert len(wide.nodes) == 5 and (wide.nodes["count"] >= 0).all()
     with pytest.raises(ValueError, match="binary"):
         collapse(wide)
+    with pytest.raises(ValueError, match="widths"):
+        collapse(binary, 3)
 
 
-def test_leaf_blocks_cover_every_leaf_in_fours():
+def test_collapse_to_eight_fills_nodes():
+    """The same 16 leaves at width 8: the root pulls inner nodes until its 8 slots are full (8 nodes of 2 leaves)."""
+    verts, faces = _from_corners([[[x, y, 0], [x + 0.5, y, 0], [x, y + 0.5, 0]] for x in range(4) for y in range(4)])
+    binary = build_bvh(verts * 10, faces, BvhParams(max_leaf_size=1))
+    wide = collapse(binary, 8)
+    check_wide(wide, binary, verts * 10, faces, 8)
+    count = wide.nodes["count"].reshape(-1, 8)
+    assert len(wide.nodes) == 9 and (count[0] == 0).all()
+    assert (count[1:, :2] == 1).all() and (count[1:, 2:] == -1).all()
+
+
+@pytest.mark.parametrize("width", WIDE)
+def test_leaf_blocks_cover_every_leaf_in_fours(width):
     verts, faces = _soup(3000, seed=3)
-    wide = collapse(build_bvh(verts, faces, BvhParams(max_leaf_size=6)))
+    wide = collapse(build_bvh(verts, faces, BvhParams(max_leaf_size=6)), width)
     lanes, child = leaf_blocks(wide)
     count = wide.nodes["count"]
     assert lanes.shape[1] == 4 and child.shape == count.shape
@@ -504,12 +526,14 @@ def test_wide_trees_are_cached_by_width(tmp_path, fresh_memory, monkeypatch):
     verts, faces = MESHES["icosphere"]()
     binary = cached_bvh(verts, faces, cache_dir=tmp_path)
     wide = cached_bvh(verts, faces, cache_dir=tmp_path, width=4)
-    assert binary.width == 2 and wide.width == 4
-    assert len(list((tmp_path / "bvh").glob("*.npz"))) == 2, "the width is part of the key"
+    wide8 = cached_bvh(verts, faces, cache_dir=tmp_path, width=8)
+    assert binary.width == 2 and wide.width == 4 and wide8.width == 8
+    assert len(list((tmp_path / "bvh").glob("*.npz"))) == 3, "the width is part of the key"
     clear_memory_cache()
     monkeypatch.setattr(bvh_mod, "build_bvh", _refuse_to_build)
     monkeypatch.setattr(bvh_mod, "collapse", _refuse_to_build)
     _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=4), wide)
+    _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=8), wide8)
     with pytest.raises(ValueError, match="width"):
         cached_bvh(verts, faces, cache_dir=tmp_path, width=3)
 

@@ -97,10 +97,20 @@ def test_bvh4_node_offsets() -> None:
     assert dtype.itemsize == 128
     names = ("lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z", "child", "count")
     assert {name: dtype.fields[name][1] for name in dtype.names} == {n: 16 * i for i, n in enumerate(names)}
-    assert {2: layout.BVH_NODE_DTYPE, 4: dtype} == layout.BVH_WIDTHS
+    assert {2: layout.BVH_NODE_DTYPE, 4: dtype, 8: layout.BVH8_NODE_DTYPE} == layout.BVH_WIDTHS
     assert layout.bvh_width(np.zeros(3, dtype)) == 4 and layout.bvh_width(np.zeros(3, layout.BVH_NODE_DTYPE)) == 2
     with pytest.raises(ValueError, match="not a BVH node table"):
         layout.bvh_width(np.zeros(3, layout.TRIANGLE_DTYPE))
+
+
+def test_bvh8_node_offsets() -> None:
+    """The 8-wide node (bvh_width=8, OpenCL float8 / int8 members): each field two 4-vector rows, 32 bytes apart."""
+    dtype = layout.BVH8_NODE_DTYPE
+    assert dtype.itemsize == 256
+    names = ("lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z", "child", "count")
+    assert {name: dtype.fields[name][1] for name in dtype.names} == {n: 32 * i for i, n in enumerate(names)}
+    assert all(dtype.fields[name][0].shape == (2, 4) for name in names)
+    assert layout.bvh_width(np.zeros(3, dtype)) == 8
 
 
 def test_bvh_compact_node_offsets() -> None:

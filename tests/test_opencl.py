@@ -310,6 +310,12 @@ _TABLE_STRUCTS = {
     "camera": "Camera",
     "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
     "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
+    "bvh8_nodes": "Bvh8Node",  # bvh_nodes packed with bvh_width=8 (float8 / int8 members)
+}
+_SPECIAL_NODES = {
+    "bvh4_nodes": layout.BVH4_NODE_DTYPE,
+    "bvh8_nodes": layout.BVH8_NODE_DTYPE,
+    "bvh_compact_nodes": layout.BVH_COMPACT_NODE_DTYPE,
 }
 
 
@@ -338,17 +344,17 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
     import pyopencl as cl
 
     for table, struct in _TABLE_STRUCTS.items():
-        special = {"bvh4_nodes": layout.BVH4_NODE_DTYPE, "bvh_compact_nodes": layout.BVH_COMPACT_NODE_DTYPE}
-        dtype = special[table] if table in special else layout.table_dtype(table, precision)
+        dtype = _SPECIAL_NODES[table] if table in _SPECIAL_NODES else layout.table_dtype(table, precision)
         rows = _random_rows(dtype, 5, np.random.default_rng(7))
         stores, words = [], 0
         for kind, member in _members(struct):
-            for c in "xyzw":
+            lanes = [f"s{k}" for k in range(8)] if kind.endswith("8") else list("xyzw")
+            for c in lanes:
                 value = f"rows[i].{member}.{c}"
-                if kind == "int4":
+                if kind in ("int4", "int8"):
                     stores.append(f"words[base + {words}] = (uint)({value});")
                     words += 1
-                elif kind == "float4" or precision == "f32":
+                elif kind in ("float4", "float8") or precision == "f32":
                     stores.append(f"words[base + {words}] = as_uint({value});")
                     words += 1
                 else:
@@ -358,7 +364,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
                     )
                     words += 2
         source = (
-            shared.defines_block({"REAL_IS_DOUBLE": int(precision == "f64")})
+            shared.defines_block({"REAL_IS_DOUBLE": int(precision == "f64"), "BVH_WIDTH": 8})
             + shared.read("prelude_cl.h")
             + shared.read("layout.h")
             + f"__kernel void copy(__global const {struct}* rows, __global uint* words) {{\n"

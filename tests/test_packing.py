@@ -208,7 +208,7 @@ def test_camera_row_and_primary_rays() -> None:
 
 
 def test_wide_bvh_packing_points_leaves_at_triangle_blocks():
-    """bvh_width=4: 4-wide nodes whose leaves name blocks of 4 triangles; every triangle row is in one block lane."""
+    """bvh_width=4 and 8: wide nodes whose leaves name blocks of 4 triangles; each triangle row in one block lane."""
     from engine import layout
 
     scene = small_scene()
@@ -234,14 +234,26 @@ def test_wide_bvh_packing_points_leaves_at_triangle_blocks():
     assert (child[count > 0] + (count[count > 0] + 3) // 4 <= n_blocks).all()
     assert (child[count == 0] < wide.packed.counts["bvh_nodes"]).all()
     with pytest.raises(ValueError, match="bvh_width"):
-        ScenePacker(bvh_width=8)
+        ScenePacker(bvh_width=3)
+    wide8 = ScenePacker(bvh_width=8)
+    wide8.sync(scene)
+    assert wide8.packed is not None
+    nodes8, blocks8 = wide8.packed.tables["bvh_nodes"], wide8.packed.tables["triangle_blocks"]
+    assert nodes8.dtype == layout.BVH8_NODE_DTYPE
+    n8 = wide8.packed.counts["triangle_blocks"]
+    lanes8 = blocks8["index"][:n8].ravel()
+    np.testing.assert_array_equal(np.sort(lanes8[lanes8 >= 0]), np.arange(n_tri))
+    count8, child8 = nodes8["count"], nodes8["child"]
+    assert (child8[count8 > 0] + (count8[count8 > 0] + 3) // 4 <= n8).all()
+    assert (child8[count8 == 0] < wide8.packed.counts["bvh_nodes"]).all()
 
 
-def test_reference_refuses_wide_trees():
+@pytest.mark.parametrize("width", [4, 8])
+def test_reference_refuses_wide_trees(width):
     from backends.reference.backend import ReferenceBackend
     from engine.errors import AberrantError
 
-    packer = ScenePacker("f64", camera_relative=False, bvh_width=4)
+    packer = ScenePacker("f64", camera_relative=False, bvh_width=width)
     updates = packer.sync(small_scene())
     assert packer.packed is not None
     with pytest.raises(AberrantError, match="bvh_width=2"):

@@ -24,6 +24,7 @@ from components import Transform
 from demos import starter
 from engine.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from engine.camera_view import scene_camera
+from engine.errors import AberrantError
 from engine.packing import ScenePacker
 from engine.scene import Scene
 
@@ -276,24 +277,44 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
 @pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "random-boxes"])
 @pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
 def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, precision, case):
-    """Binary and 4-wide trees (with their triangle blocks) give bit-identical frames, and so does testing
-    every triangle: the same per-triangle arithmetic and the same tie rule, whatever the visiting order."""
+    """Binary, 4-wide and (OpenCL) 8-wide trees (with their triangle blocks) give bit-identical frames, and
+    so does testing every triangle: the same per-triangle arithmetic and the same tie rule, whatever the
+    visiting order."""
     backend = backend_factory(backend_name, precision)
     scene = CASES[case].build(assets)
     saved = dict(backend.extra_defines)
+    widths = (4, 8) if backend_name == "opencl" else (4,)
+    frames: dict[str, Frame] = {}
     try:
         binary = render(backend, scene, CASES[case].size, bvh_width=2, bvh_compact=False)
-        wide = render(backend, scene, CASES[case].size, bvh_width=4)
-        assert backend._bvh["BVH_WIDTH"] == 4
-        backend.extra_defines = {**saved, "BRUTE_FORCE": 1}
-        brute = render(backend, scene, CASES[case].size, bvh_width=4)
+        for width in widths:
+            frames[f"wide{width}"] = render(backend, scene, CASES[case].size, bvh_width=width)
+            assert backend._bvh["BVH_WIDTH"] == width
+            backend.extra_defines = {**saved, "BRUTE_FORCE": 1}
+            frames[f"brute{width}"] = render(backend, scene, CASES[case].size, bvh_width=width)
+            backend.extra_defines = saved
     finally:
         backend.extra_defines = saved
         scene.close()
     assert (binary.instance >= 0).mean() > 0.3
-    for name in AOVS:
-        np.testing.assert_array_equal(wide.aov(name), binary.aov(name), err_msg=name)
-        np.testing.assert_array_equal(brute.aov(name), binary.aov(name), err_msg=name)
+    for label, frame in frames.items():
+        for name in AOVS:
+            np.testing.assert_array_equal(frame.aov(name), binary.aov(name), err_msg=f"{label} {name}")
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_glsl_refuses_eight_wide_trees(backend_factory, precision):
+    """8-wide nodes are read as float8: GLSL has no 8-vectors, so its backend refuses the width by name."""
+    backend = backend_factory("glsl", precision)
+    packer = ScenePacker(precision=precision, camera_relative=True, bvh_width=8)
+    scene = random_boxes(count=5)
+    try:
+        updates = packer.sync(scene)
+    finally:
+        scene.close()
+    assert packer.packed is not None
+    with pytest.raises(AberrantError, match="BVH widths 2, 4, not 8"):
+        backend.upload(packer.packed, updates)
 
 
 @pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "watertight-vertices", "random-boxes"])

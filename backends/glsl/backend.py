@@ -95,6 +95,10 @@ def _write_texels(image: moderngl.Texture, first: int, texels: np.ndarray) -> No
         pos += count
 
 
+#: BVH widths the shader traverses: 8-wide nodes are read as float8, which GLSL does not have.
+GLSL_BVH_WIDTHS: tuple[int, ...] = (2, 4)
+
+
 class GlslBackend(Backend):
     """Traces with the shared core in an OpenGL 4.3 compute shader (moderngl)."""
 
@@ -236,6 +240,13 @@ class GlslBackend(Backend):
         if packed.precision != self.precision:
             raise AberrantError(
                 f"glsl backend traces at {self.precision} but the scene was packed at {packed.precision}"
+            )
+        width = layout.bvh_width(packed.tables["bvh_nodes"])
+        if width not in GLSL_BVH_WIDTHS:
+            raise AberrantError(
+                f"glsl backend traverses BVH widths {', '.join(map(str, GLSL_BVH_WIDTHS))}, not {width} "
+                f"(8-wide nodes need 8-vectors, which GLSL lacks; OpenCL only); pack with "
+                f"bvh_width={self.bvh_width} (ScenePacker)"
             )
         written = 0
         todo = list(updates)

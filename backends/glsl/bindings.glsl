@@ -73,7 +73,9 @@ TriangleUv fetch_triangle_uv_(int i)
     return t;
 }
 
-#if BVH_WIDTH == 4
+#if BVH_WIDTH == 8
+#error "BVH_WIDTH 8 is OpenCL only (GLSL has no 8-vectors)"
+#elif BVH_WIDTH == 4
 Bvh4Node fetch_bvh_node_(int i)
 {
     int b = i * BVH_NODES_STRIDE;

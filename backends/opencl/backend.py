@@ -194,9 +194,11 @@ class OpenClBackend(Backend):
     name: ClassVar[str] = "opencl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
     camera_relative: ClassVar[bool] = True
-    #: 4-wide nodes tested with float4 operations: PoCL runs each work-item as scalar code, so the
-    #: vector width is what a CPU core's SIMD gets (measured against binary: docs/performance.md).
-    bvh_width: ClassVar[int] = 4
+    #: 8-wide nodes tested with float8 operations: PoCL runs each work-item as scalar code, so the
+    #: vector width is what a CPU core's SIMD gets (one AVX2 register per bound component). Against
+    #: 4-wide (PoCL 3.1, 800x800, CPU time per frame, interleaved): -3 % on the 10k torus, -4 % on the
+    #: 200k one, even on ten boxes; binary -> 4-wide gave -17 %. Leaves stay blocks of 4 triangles.
+    bvh_width: ClassVar[int] = 8
 
     def __init__(
         self,
@@ -247,6 +249,8 @@ class OpenClBackend(Backend):
         self.compile_count = 0
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
         self.extra_defines: dict[str, int] = {}
+        #: Program build options (benchmarks may compare others; part of each kernel's cache key).
+        self.build_options: tuple[str, ...] = BUILD_OPTIONS
 
     # --- availability ------------------------------------------------------------------
 
@@ -374,13 +378,13 @@ class OpenClBackend(Backend):
 
     def _kernel(self, defines: dict[str, int]) -> cl.Kernel:
         """The kernel of a variant, built on first use and kept."""
-        key = tuple(sorted(defines.items()))
+        key = (*sorted(defines.items()), *((option, 1) for option in self.build_options))
         kernel = self._kernels.get(key)
         if kernel is None:
             cl = self._cl
             program = cl.Program(self._context(), self.source(defines))
             try:
-                program = program.build(options=list(BUILD_OPTIONS), cache_dir=self._cache_dir)
+                program = program.build(options=list(self.build_options), cache_dir=self._cache_dir)
             except cl.Error as e:  # its message carries the build log
                 raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
             kernel = cl.Kernel(program, "trace")

@@ -76,8 +76,8 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
             inner = inner[inner < count]
             frontier = np.concatenate([link0[inner], link1[inner]])
         return depth
-    if layout.bvh_width(nodes) == 4:  # wide nodes only: their leaves live in their slots
-        child, kind = nodes["child"].astype(np.int64), nodes["count"]
+    if layout.bvh_width(nodes) > 2:  # wide nodes only: their leaves live in their slots
+        child, kind = nodes["child"].reshape(count, -1).astype(np.int64), nodes["count"].reshape(count, -1)
         is_child = np.zeros(count, bool)
         kids = child[kind == 0]
         is_child[kids[(kids >= 0) & (kids < count)]] = True
@@ -107,10 +107,11 @@ def bvh_depth(nodes: np.ndarray, count: int) -> int:
 def stack_entries(nodes: np.ndarray, count: int) -> int:
     """The most traversal-stack entries any tree of a node table can need.
 
-    A binary visit leaves at most one entry per level; a wide one pushes up to 4 and pops 1, leaving 3.
+    A binary visit leaves at most one entry per level; a w-wide one pushes up to w and pops 1, leaving w - 1.
     """
     depth = bvh_depth(nodes, count)
-    return 3 * depth + 1 if count and layout.bvh_width(nodes[:count]) == 4 else depth
+    width = layout.bvh_width(nodes[:count]) if count else 2
+    return (width - 1) * depth + 1 if width > 2 else depth
 
 
 def stack_size(nodes: np.ndarray, count: int) -> int:

@@ -68,7 +68,7 @@ STRUCT_END(BvhCompactNode)
 #define BVH_LINK_MASK 127
 #define BVH_GRID_MAX 65535
 
-/* The record of the bvh_nodes table: BVH_WIDTH (2 or 4) is the packer's bvh_width, BVH_COMPACT its
+/* The record of the bvh_nodes table: BVH_WIDTH (2, 4, or 8 in OpenCL only) is the packer's bvh_width, BVH_COMPACT its
  * bvh_compact. */
 #ifndef BVH_WIDTH
 #define BVH_WIDTH 2
@@ -76,7 +76,21 @@ STRUCT_END(BvhCompactNode)
 #ifndef BVH_COMPACT
 #define BVH_COMPACT 0
 #endif
-#if BVH_WIDTH == 4
+#if BVH_WIDTH == 8
+/* bvh_nodes with BVH_WIDTH 8 (OpenCL C only: GLSL has no 8-vectors, its host refuses the width):
+ * Bvh4Node with eight lanes (an AVX2 register of floats per bound component). */
+STRUCT_BEGIN(Bvh8Node)
+    float8 lo_x;
+    float8 lo_y;
+    float8 lo_z;
+    float8 hi_x;
+    float8 hi_y;
+    float8 hi_z;
+    int8 child;
+    int8 count;
+STRUCT_END(Bvh8Node)
+#define BvhRow Bvh8Node
+#elif BVH_WIDTH == 4
 #define BvhRow Bvh4Node
 #elif BVH_COMPACT
 #define BvhRow BvhCompactNode
@@ -84,7 +98,7 @@ STRUCT_END(BvhCompactNode)
 #define BvhRow BvhNode
 #endif
 
-/* triangle_blocks (BVH_WIDTH 4): four triangles of a leaf SoA, lane i = triangle i; index = their
+/* triangle_blocks (BVH_WIDTH 4 and 8): four triangles of a leaf SoA, lane i = triangle i; index = their
  * rows in triangles (-1: a padding lane). */
 STRUCT_BEGIN(TriangleBlock)
     float4 v0x;

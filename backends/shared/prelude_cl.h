@@ -30,6 +30,8 @@ typedef double4 real4;
 #define REAL_C(x) x
 #define TO_REAL3(v) convert_double3(v)
 #define TO_REAL4(v) convert_double4(v)
+#define TO_REAL8(v) convert_double8(v)
+typedef double8 real8;
 #else
 typedef float real;
 typedef float2 real2;
@@ -40,6 +42,8 @@ typedef float4 real4;
 #define REAL_C(x) x##f
 #define TO_REAL3(v) convert_float3(v)
 #define TO_REAL4(v) (v)
+#define TO_REAL8(v) (v)
+typedef float8 real8;
 #endif
 
 /* --- constructors and conversions ------------------------------------------------- */
@@ -48,6 +52,8 @@ typedef float4 real4;
 #define R3(a, b, c) ((real3)((real)(a), (real)(b), (real)(c)))
 #define R4(a, b, c, d) ((real4)((real)(a), (real)(b), (real)(c), (real)(d)))
 #define R3S(s) ((real3)((real)(s)))
+/* OpenCL only (8-wide BVH nodes): a real8 with every lane s. */
+#define R8S(s) ((real8)((real)(s)))
 #define F3(a, b, c) ((float3)((float)(a), (float)(b), (float)(c)))
 #define F4(a, b, c, d) ((float4)((float)(a), (float)(b), (float)(c), (float)(d)))
 #define TO_REAL(x) ((real)(x))
