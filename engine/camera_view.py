@@ -66,8 +66,54 @@ def scene_camera(scene: Scene) -> CameraView:
     return CameraView.from_components(scene.get(scene.camera_entity, Transform), scene.get(scene.camera_entity, Camera))
 
 
-def pack_camera(view: CameraView, origin: np.ndarray, precision: Precision, width: int, height: int) -> np.ndarray:
-    """One row of the camera table, relative to the packed origin."""
+#: A camera closer than this (relative to the size of its coordinates, in a box's local units) to a box face
+#: has its box looked up per ray: far above the kernels' nudge (5e-5 in float32) and rounding.
+CAMERA_FACE_MARGIN = 1e-3
+#: ``size.z`` of the camera row when the camera's box must be looked up per ray (docs/semantics.md section 14).
+CAMERA_BOX_PER_RAY = -2
+
+
+def camera_box(position: np.ndarray, aberrations: np.ndarray | None) -> int:
+    """The active box of every primary ray, or CAMERA_BOX_PER_RAY when rays may disagree.
+
+    ``position`` is camera-relative, ``aberrations`` the packed rows in use (rule 5: the last row containing
+    the point). Each ray looks its box up just past the camera along its own direction; that is the same
+    box for all rays when the camera is further than the nudge (plus the kernel's rounding) from every face,
+    which this demands with a wide margin. Near a face (a camera standing on one, touching boxes) each ray
+    keeps its own look-up.
+    """
+    if aberrations is None:
+        return CAMERA_BOX_PER_RAY
+    p = np.asarray(position, dtype=np.float64)
+    size = max(1.0, float(np.linalg.norm(p)))
+    found = -1
+    for b, row in enumerate(aberrations):
+        m = np.asarray(row["world_to_local"], dtype=np.float64)
+        q = m[:, :3] @ p + m[:, 3]
+        # Local units per world unit along each axis, and the size of the terms q is computed from.
+        scale = np.linalg.norm(m[:, :3], axis=1)
+        margin = CAMERA_FACE_MARGIN * (scale * size + np.abs(m[:, 3]) + 1.0)
+        gap = np.abs(np.abs(q) - 0.5)
+        if not (np.all(np.isfinite(q)) and np.all(gap > margin)):
+            return CAMERA_BOX_PER_RAY
+        if np.all(np.abs(q) < 0.5):
+            found = b
+    return found
+
+
+def pack_camera(
+    view: CameraView,
+    origin: np.ndarray,
+    precision: Precision,
+    width: int,
+    height: int,
+    aberrations: np.ndarray | None = None,
+) -> np.ndarray:
+    """One row of the camera table, relative to the packed origin.
+
+    ``aberrations``: the packed rows in use, for the camera's box (``size.z``, camera_box); without them
+    every ray looks its box up.
+    """
     row = np.zeros(1, dtype=layout.camera_dtype(precision))
     aspect = width / height
     row["position"][0, :3] = view.position - origin
@@ -79,5 +125,5 @@ def pack_camera(view: CameraView, origin: np.ndarray, precision: Precision, widt
     row["sigma_min"][0, :3] = lo
     row["sigma_max"][0, :3] = hi
     row["lens"][0, :2] = (math.tan(math.radians(view.fov_deg) / 2.0), aspect)
-    row["size"][0, :2] = (width, height)
+    row["size"][0, :3] = (width, height, camera_box(view.position - origin, aberrations))
     return row

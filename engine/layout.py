@@ -265,7 +265,8 @@ def camera_dtype(precision: Precision) -> np.dtype:
     ``right``, ``up``, ``back`` are the columns of R_cam; ``origin.xyz`` is the
     packed origin (for world-space checkers); ``sigma_min``/``sigma_max`` are
     the radial mode's corner-ray bounds m_k, M_k; ``lens = (tan(fov/2),
-    aspect, 0, 0)``; ``size = (width, height, 0, 0)``.
+    aspect, 0, 0)``; ``size = (width, height, camera box, 0)``, the camera box being
+    every primary ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``).
     """
     return _build(
         [

@@ -148,6 +148,7 @@ class GlslBackend(Backend):
         self._table_bytes: dict[str, int] = {}
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
+        self._boxes: np.ndarray | None = None
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
@@ -274,6 +275,8 @@ class GlslBackend(Backend):
                     )
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
+        # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
+        self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
         self._features = packed.features
         self._uploaded = True
         return written
@@ -404,7 +407,7 @@ class GlslBackend(Backend):
             ctx = self._context()
             self._ensure_outputs(width, height, aovs)
             program = self._program(self._defines(aovs))
-            row = pack_camera(camera, self._origin, self.precision, width, height)
+            row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes)
             if self.table_store == "image":
                 _write_texels(self._camera, 0, row.view(np.uint32).reshape(-1, 4))
                 for unit, name in enumerate(layout.TABLES, start=1):

@@ -233,6 +233,7 @@ class OpenClBackend(Backend):
         self._tables: dict[str, cl.Buffer] = {}
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
+        self._boxes: np.ndarray | None = None
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
@@ -349,6 +350,8 @@ class OpenClBackend(Backend):
                 )
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
+        # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
+        self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
         self._features = packed.features
         self._uploaded = True
         return written
@@ -423,7 +426,7 @@ class OpenClBackend(Backend):
         start = time.perf_counter()
         kernel = self._kernel(self._defines())
         self._ensure_outputs(width, height, aovs)
-        self._camera_row = pack_camera(camera, self._origin, self.precision, width, height)
+        self._camera_row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes)
         cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         args: list[object] = [self._tables[name] for name in layout.TABLES]
         args.append(self._camera)

@@ -1007,8 +1007,10 @@ BoxSpan box_axis(BoxSpan span, real a, real v, int k)
 {
     if (v != REAL(0.0f)) {
         bool up = v > REAL(0.0f);
-        real t_minus = (REAL(-0.5f) - a) / v;
-        real t_plus = (REAL(0.5f) - a) / v;
+        /* One division per axis, not two (section 14: a face's t may differ by an ulp from the reference's). */
+        real inv = REAL(1.0f) / v;
+        real t_minus = (REAL(-0.5f) - a) * inv;
+        real t_plus = (REAL(0.5f) - a) * inv;
         real tn = up ? t_minus : t_plus;
         real tf = up ? t_plus : t_minus;
         if (tn > span.t_near) {
@@ -1094,6 +1096,13 @@ bool zero_deformation(Aberration box)
     return box.deformation.x == REAL(0.0f) && box.deformation.y == REAL(0.0f) && box.deformation.z == REAL(0.0f);
 }
 
+/* The perceived and world directions after a transition, and the new perceived rate. */
+STRUCT_BEGIN(Turn)
+    real3 w;
+    real3 r;
+    real f;
+STRUCT_END(Turn)
+
 #if HAS_METRIC
 /* s (.) (R^T w) in box axes, s = 1 + D (aberrations._metric_local); rot rows are R's rows. */
 real3 metric_local(Aberration box, real3 w)
@@ -1102,20 +1111,22 @@ real3 metric_local(Aberration box, real3 w)
     return (R3S(1.0f) + box.deformation.xyz) * axes;
 }
 
-/* r = normalize(R scaled) (aberrations.world_direction), scaled = metric_local(box, w); previous if
- * degenerate. (The caller skips a box with D = 0: it leaves the unit w as it is.) */
-real3 metric_direction(Aberration box, real3 scaled, real3 previous)
+/* r = normalize(R scaled) (aberrations.world_direction), scaled = metric_local(box, w) of length norm,
+ * f = perceived_rate(norm); previous if degenerate. R is a rotation, so |R scaled| = |scaled|: r is
+ * R scaled times f, one norm and one division for both (docs/semantics.md section 14). (The caller
+ * skips a box with D = 0: it leaves the unit w as it is.) */
+real3 metric_direction(Aberration box, real3 scaled, real norm, real f, real3 previous)
 {
     real3 world = R3(dot(box.rot0.xyz, scaled), dot(box.rot1.xyz, scaled), dot(box.rot2.xyz, scaled));
-    return normalize_or_keep(world, previous);
+    return (norm >= MIN_NORM && norm < REAL_MAX) ? world * f : previous;
 }
 #endif
 
-/* Perceived length per world length in a metric box (aberrations.perceived_per_world): 1 / |scaled|,
- * scaled = metric_local(box, w) (0 where the norm overflows); 1 elsewhere and in a box with D = 0. */
-real perceived_rate(real3 scaled)
+/* Perceived length per world length in a metric box (aberrations.perceived_per_world): 1 / |scaled|
+ * from norm = |scaled|, scaled = metric_local(box, w) (0 where the norm overflows); 1 elsewhere and
+ * in a box with D = 0. */
+real perceived_rate(real norm)
 {
-    real norm = length(scaled);
     return norm > REAL(0.0f) ? REAL(1.0f) / norm : REAL(1.0f);
 }
 
@@ -1151,13 +1162,6 @@ real3 bend(Aberration box, real3 w, real scale, real3 lo, real3 hi)
 }
 #endif
 
-/* The perceived and world directions after a transition, and the new perceived rate. */
-STRUCT_BEGIN(Turn)
-    real3 w;
-    real3 r;
-    real f;
-STRUCT_END(Turn)
-
 /* The transition from box old to box next (aberrations.transition; -1 for none), lo/hi the sigma
  * bounds: 1. leaving a bending box, its exit rule sets w (restore: d0, repeat: its entry rule
  * again, invert: with -D); 2. entering a bending box, its entry rule bends w; 3. r follows from w
@@ -1191,8 +1195,9 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
         Aberration box = ABERRATION(next);
         if (box.meta.x == MODE_METRIC && !zero_deformation(box)) {
             real3 scaled = metric_local(box, w);
-            turn.r = metric_direction(box, scaled, r);
-            turn.f = perceived_rate(scaled);
+            real norm = length(scaled);
+            turn.f = perceived_rate(norm);
+            turn.r = metric_direction(box, scaled, norm, turn.f, r);
         }
     }
 #endif
@@ -1289,11 +1294,10 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
 
 #if HAS_ABERRATIONS
 /* After an event that left the ray at t along its leg (a box face) or at a new leg's start (a portal,
- * t = 0): the active box just past that point, the transition into it (rule 7), and a new leg where
- * the direction changed. Lambda is closed off where the perceived rate changes. */
-FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, real3 lo, real3 hi)
+ * t = 0): the transition into the active box next just past that point (rule 7; box_after), and a
+ * new leg where the direction changed. Lambda is closed off where the perceived rate changes. */
+FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, int next, real3 lo, real3 hi)
 {
-    int next = box_after(SCENE_PASS ray.o, ray.r, ray.o_len, t);
     Turn turn = transition(SCENE_PASS ray.aberration, next, ray.w, ray.r, ray.d0, lo, hi);
     real len_r = ray.r_len;
     if (same_direction(turn.r, ray.r)) {
@@ -1332,7 +1336,13 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
     real3 sigma_lo = cam.sigma_min.xyz;
     real3 sigma_hi = cam.sigma_max.xyz;
-    ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
+    /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
+     * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
+    int camera_box = cam.size.z;
+    if (camera_box != -1) {
+        int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
+        ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
+    }
 #endif
     MeshHit hit;
     hit.t = REAL_MAX;
@@ -1403,14 +1413,15 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         if (kind == EVENT_PORTAL) {
             ray = teleport(SCENE_PASS ray, portal.row, portal.t);
 #if HAS_ABERRATIONS
-            ray = enter_box(SCENE_PASS ray, REAL(0.0f), sigma_lo, sigma_hi);
+            ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)), sigma_lo,
+                            sigma_hi);
 #endif
         }
 #endif
 #if HAS_ABERRATIONS
         /* 3. A box face: the ray stays on the face, leaving it; the active box just past it. */
         if (kind == EVENT_ABERRATION) {
-            ray = enter_box(SCENE_PASS ray, face.t, sigma_lo, sigma_hi);
+            ray = enter_box(SCENE_PASS ray, face.t, box_after(SCENE_PASS ray.o, ray.r, ray.o_len, face.t), sigma_lo, sigma_hi);
             ray.leaving_kind = EVENT_ABERRATION;
             ray.leaving = face.row;
         }

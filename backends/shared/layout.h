@@ -166,7 +166,8 @@ STRUCT_END(TlasNode)
 
 /* camera: one row per frame. position is camera-relative; right/up/back are the
  * columns of R_cam; origin is the packed origin (for world-space checkers);
- * lens = (tan(fov/2), aspect, 0, 0); size = (width, height, 0, 0). */
+ * lens = (tan(fov/2), aspect, 0, 0); size = (width, height, camera box, 0): the camera box is every
+ * primary ray's active box, or -2 where each ray looks it up (engine.camera_view.camera_box). */
 STRUCT_BEGIN(Camera)
     real4 position;
     real4 right;
