@@ -317,12 +317,23 @@ def test_glsl_refuses_eight_wide_trees(backend_factory, precision):
         backend.upload(packer.packed, updates)
 
 
-@pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "watertight-vertices", "random-boxes"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "imported-mesh",
+        "watertight-sphere",
+        "watertight-vertices",
+        "watertight-diagonals",
+        "watertight-corner",
+        "random-boxes",
+    ],
+)
 @pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
 def test_compact_bvh_renders_the_same(backend_factory, assets, backend_name, precision, case):
-    """Compact records (16-bit grid boxes, conservative) give frames bit-identical to the binary tree's:
-    looser boxes only visit more, the triangle test and its tie rule are unchanged; brute force through
-    their links too."""
+    """Compact records (16-bit grid boxes, conservative, slabbed in the ray's frame with a widening that
+    contains slab()'s interval) give frames bit-identical to the binary tree's: looser boxes only visit
+    more, the triangle test and its tie rule are unchanged; brute force through their links too. The
+    watertight cases put rays exactly on box bounds (too tight a slab fails them)."""
     backend = backend_factory(backend_name, precision)
     scene = CASES[case].build(assets)
     saved = dict(backend.extra_defines)
