@@ -13,6 +13,7 @@ import numpy as np
 
 from components import Camera, Transform
 from engine import layout
+from engine.box_clearance import camera_clearance
 from engine.layout import Precision
 from engine.maths import quat_to_matrix
 from engine.scene import Scene
@@ -108,11 +109,13 @@ def pack_camera(
     width: int,
     height: int,
     aberrations: np.ndarray | None = None,
+    bounds: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """One row of the camera table, relative to the packed origin.
 
     ``aberrations``: the packed rows in use, for the camera's box (``size.z``, camera_box); without them
-    every ray looks its box up.
+    every ray looks its box up. ``bounds``: the instances' packed bounds, for the camera's clearance
+    (``lens.z``, box_clearance.camera_clearance); without them every first mesh search runs.
     """
     row = np.zeros(1, dtype=layout.camera_dtype(precision))
     aspect = width / height
@@ -124,6 +127,10 @@ def pack_camera(
     lo, hi = view.sigma_bounds(aspect)
     row["sigma_min"][0, :3] = lo
     row["sigma_max"][0, :3] = hi
-    row["lens"][0, :2] = (math.tan(math.radians(view.fov_deg) / 2.0), aspect)
+    row["lens"][0, :3] = (
+        math.tan(math.radians(view.fov_deg) / 2.0),
+        aspect,
+        camera_clearance(view.position - origin, bounds),
+    )
     row["size"][0, :3] = (width, height, camera_box(view.position - origin, aberrations))
     return row

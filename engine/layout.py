@@ -224,7 +224,8 @@ def aberration_dtype(precision: Precision) -> np.dtype:
     """An aberration box.
 
     ``world_to_local`` rows map camera-relative world points into the unit box
-    [-1/2, 1/2]^3; ``rotation`` rows are the box's rotation R (``w`` unused);
+    [-1/2, 1/2]^3; ``rotation`` rows are the box's rotation R (``w`` of row 0: the box's
+    clearance to every instance, of row 1: its gap to every other box, engine/box_clearance.py);
     ``deformation.xyz`` is D; ``meta = (mode, exit, priority, entity)``.
     Rows are sorted by (priority, entity): the active box at a point is the
     *last* row that contains it.
@@ -265,7 +266,8 @@ def camera_dtype(precision: Precision) -> np.dtype:
     ``right``, ``up``, ``back`` are the columns of R_cam; ``origin.xyz`` is the
     packed origin (for world-space checkers); ``sigma_min``/``sigma_max`` are
     the radial mode's corner-ray bounds m_k, M_k; ``lens = (tan(fov/2),
-    aspect, 0, 0)``; ``size = (width, height, camera box, 0)``, the camera box being
+    aspect, clearance, 0)``, the camera's distance to every instance's bounds
+    (``box_clearance``); ``size = (width, height, camera box, 0)``, the camera box being
     every primary ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``).
     """
     return _build(

@@ -22,6 +22,7 @@ import numpy as np
 
 from components import Aberration, Mesh, Portal, Transform
 from engine import layout
+from engine.box_clearance import box_clearances
 from engine.bvh import BvhParams, cached_bvh, compact, leaf_blocks, offset_compact
 from engine.camera_view import scene_camera
 from engine.layout import Precision
@@ -247,6 +248,13 @@ class ScenePacker:
             updates.append(TableUpdate("instances", range(row, row + 1)))
         if instance_rows:
             updates += self._update_tlas(sorted(instance_rows))
+            if packed.counts["aberrations"] and "aberrations" not in changed_real:
+                # The boxes' clearances to the instances: only the rows whose clearance changed.
+                old = packed.tables["aberrations"]
+                self._pack_aberrations(scene)
+                updates.extend(
+                    TableUpdate("aberrations", r) for r in _changed_ranges(old, packed.tables["aberrations"])
+                )
         for row in sorted(material_rows):
             self._pack_material_row(scene, row)
             updates.append(TableUpdate("materials", range(row, row + 1)))
@@ -450,6 +458,11 @@ class ScenePacker:
             p, r, s = _transforms([t for _, (t, _) in rows], packed.origin)
             table["world_to_local"][: len(rows)] = _inverse(p, r, s)
             table["rotation"][: len(rows), :, :3] = r
+            # rotation[0].w: the box's clearance to every instance, rotation[1].w: its gap to every other box
+            # (world distances, lower bounds): the kernels skip the searches they prove empty (box_clearance).
+            instance, boxes = box_clearances(table["world_to_local"][: len(rows)], *self._instance_bounds())
+            table["rotation"][: len(rows), 0, 3] = instance
+            table["rotation"][: len(rows), 1, 3] = boxes
             for i, (entity, (_, ab)) in enumerate(rows):
                 table["deformation"][i, :3] = ab.deformation
                 table["meta"][i] = (

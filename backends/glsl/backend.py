@@ -26,6 +26,7 @@ import numpy as np
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from engine import layout
+from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
@@ -149,6 +150,7 @@ class GlslBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._boxes: np.ndarray | None = None
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
@@ -277,6 +279,8 @@ class GlslBackend(Backend):
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
         self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
+        # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
+        self._bounds = instance_bounds(packed)
         self._features = packed.features
         self._uploaded = True
         return written
@@ -407,7 +411,7 @@ class GlslBackend(Backend):
             ctx = self._context()
             self._ensure_outputs(width, height, aovs)
             program = self._program(self._defines(aovs))
-            row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes)
+            row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes, self._bounds)
             if self.table_store == "image":
                 _write_texels(self._camera, 0, row.view(np.uint32).reshape(-1, 4))
                 for unit, name in enumerate(layout.TABLES, start=1):

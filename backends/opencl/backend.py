@@ -28,6 +28,7 @@ import numpy as np
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from engine import layout
+from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
@@ -234,6 +235,7 @@ class OpenClBackend(Backend):
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._boxes: np.ndarray | None = None
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._features = Features()
         self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
         self._tlas_stack = shared.MIN_TLAS_STACK
@@ -352,6 +354,8 @@ class OpenClBackend(Backend):
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
         self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
+        # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
+        self._bounds = instance_bounds(packed)
         self._features = packed.features
         self._uploaded = True
         return written
@@ -426,7 +430,7 @@ class OpenClBackend(Backend):
         start = time.perf_counter()
         kernel = self._kernel(self._defines())
         self._ensure_outputs(width, height, aovs)
-        self._camera_row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes)
+        self._camera_row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes, self._bounds)
         cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         args: list[object] = [self._tables[name] for name in layout.TABLES]
         args.append(self._camera)

@@ -43,6 +43,9 @@
  *                      links in one 32-byte record (the packer's bvh_compact; GLSL on llvmpipe)
  *   USE_TLAS           find instances through the top-level tree (tlas_nodes), not a loop over all
  *   TLAS_STACK_SIZE    its traversal stack; the host sizes it to the tree's depth
+ *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
+ *                      the camera row's lens.z); FACE_NEXT_BOX 1: the box after a face of a box alone
+ *                      (rot1.w) from the face, not the loop (engine/box_clearance.py); 0 for A/B only
  *
  * Entry point: Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -84,6 +87,16 @@
 
 #ifndef HAS_METRIC
 #define HAS_METRIC 0
+#endif
+/* Shortcuts the host's box clearances prove exact (engine/box_clearance.py, docs/semantics.md section 14);
+ * 0 turns one off (A/B benchmarks, and tests that the frames are bit-identical either way). Measured
+ * (800x800, CPU time): -16 ms OpenCL, -29 ms GLSL per frame on ten-boxes-aberration, -6 ms GLSL on
+ * ten-boxes-portals. */
+#ifndef SKIP_CLEAR_SEARCH
+#define SKIP_CLEAR_SEARCH 1
+#endif
+#ifndef FACE_NEXT_BOX
+#define FACE_NEXT_BOX 1
 #endif
 #ifndef HAS_RADIAL
 #define HAS_RADIAL 0
@@ -168,11 +181,17 @@ STRUCT_BEGIN(MeshHit)
     int triangle;
 STRUCT_END(MeshHit)
 
-/* The next event of a ray: its kind, distance t along r and the row of what was hit. */
+/* The next event of a ray: its kind, distance t along r and the row of what was hit. A box face also
+ * gives its box's exit t when the face is the entry (-REAL_MAX for an exit face) and the box's gap to
+ * every other box, and the largest clearance to every instance of a box the segment from t_min lies in
+ * (0 for none): docs/semantics.md section 14, engine/box_clearance.py. */
 STRUCT_BEGIN(Event)
     real t;
     int kind;
     int row;
+    real far;
+    real gap;
+    real clear;
 STRUCT_END(Event)
 
 /* Per-ray set-up of the watertight triangle test (Woop, Benthin & Wald 2013). */
@@ -1095,6 +1114,9 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
     best.t = REAL_MAX;
     best.kind = EVENT_NONE;
     best.row = -1;
+    best.far = -REAL_MAX;
+    best.gap = REAL(0.0f);
+    best.clear = REAL(0.0f);
     int count = SETTINGS.counts.y;
     for (int b = 0; b < count; ++b) {
         Aberration box = ABERRATION(b);
@@ -1114,12 +1136,24 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
                 best.t = span.t_near;
                 best.kind = EVENT_ABERRATION;
                 best.row = id;
+                best.far = span.t_far;
+                best.gap = box.rot1.w;
             }
             id = BOX_FACES * b + span.far_face;
-            if (span.far_face >= 0 && span.t_far > t_min && span.t_far < best.t && id != skip) {
-                best.t = span.t_far;
-                best.kind = EVENT_ABERRATION;
-                best.row = id;
+            if (span.far_face >= 0 && span.t_far > t_min && id != skip) {
+                if (span.t_far < best.t) {
+                    best.t = span.t_far;
+                    best.kind = EVENT_ABERRATION;
+                    best.row = id;
+                    best.far = -REAL_MAX;
+                    best.gap = box.rot1.w;
+                }
+#if SKIP_CLEAR_SEARCH
+                /* The segment from t_min to this exit lies in the box: its clearance bounds the reach. */
+                if (span.t_near <= t_min) {
+                    best.clear = max(best.clear, box.rot0.w);
+                }
+#endif
             }
         }
     }
@@ -1147,6 +1181,20 @@ int box_after(SCENE_DECL real3 o, real3 r, real o_len, real t)
 {
     real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t);
     return containing_box(SCENE_PASS o + (t + nudge) * r);
+}
+
+/* box_after for a box face event (face): a box farther than the nudge from every other box (its gap,
+ * from the host) is the only one that can hold the looked-up point, and the point is in it exactly when
+ * the face is its entry and the nudge stays short of its exit. Else the loop over the boxes. */
+int box_after_face(SCENE_DECL real3 o, real3 r, real o_len, real r_len, Event face)
+{
+    real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + face.t);
+#if FACE_NEXT_BOX
+    if (face.gap > REAL(2.0f) * nudge * r_len) {
+        return face.t + nudge <= face.far ? face.row / BOX_FACES : -1;
+    }
+#endif
+    return containing_box(SCENE_PASS o + (face.t + nudge) * r);
 }
 
 bool zero_deformation(Aberration box)
@@ -1276,6 +1324,9 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
     best.t = REAL_MAX;
     best.kind = EVENT_NONE;
     best.row = -1;
+    best.far = -REAL_MAX;
+    best.gap = REAL(0.0f);
+    best.clear = REAL(0.0f);
     int count = SETTINGS.counts.z;
     for (int p = 0; p < count; ++p) {
         Portal portal = PORTAL(p);
@@ -1424,12 +1475,33 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #endif
 #if HAS_ABERRATIONS
         Event face = nearest_box_face(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
+        bool search = true;
         if (face.t < REAL_MAX) {
-            t_cut = min(t_cut, face.t + tie_window(ray.o_len, face.t));
+            real tie = tie_window(ray.o_len, face.t);
+            t_cut = min(t_cut, face.t + tie);
+            /* Inside a box whose clearance to every instance exceeds the search's reach past its exit (the
+             * tie window, twice over for rounding), no mesh can be hit: no search (section 14). */
+            search = !(face.clear > REAL(2.0f) * tie * ray.r_len);
+        }
+#else
+        bool search = true;
+#endif
+#if SKIP_CLEAR_SEARCH && HAS_SPACE
+        /* The first leg starts at the camera: a search that ends (with the tie window for rounding) nearer
+         * than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
+        if (pass == 0 && (t_cut + REAL(2.0f) * tie_window(ray.o_len, t_cut)) * ray.r_len < cam.lens.z) {
+            search = false;
         }
 #endif
         /* The mesh search stops where a mesh can no longer win. */
-        MeshHit mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
+        MeshHit mesh;
+        mesh.t = t_cut;
+        mesh.bary = R3S(0.0f);
+        mesh.instance = -1;
+        mesh.triangle = -1;
+        if (search) {
+            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
+        }
         int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
 #if HAS_SPACE
         /* Candidates within the tie window of the nearest are tied: portal, then mesh, then box face. */
@@ -1479,7 +1551,8 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #if HAS_ABERRATIONS
         /* 3. A box face: the ray stays on the face, leaving it; the active box just past it. */
         if (kind == EVENT_ABERRATION) {
-            ray = enter_box(SCENE_PASS ray, face.t, box_after(SCENE_PASS ray.o, ray.r, ray.o_len, face.t), sigma_lo, sigma_hi);
+            ray = enter_box(SCENE_PASS ray, face.t, box_after_face(SCENE_PASS ray.o, ray.r, ray.o_len, ray.r_len, face),
+                            sigma_lo, sigma_hi);
             ray.leaving_kind = EVENT_ABERRATION;
             ray.leaving = face.row;
         }

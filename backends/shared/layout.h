@@ -132,7 +132,9 @@ STRUCT_BEGIN(Instance)
 STRUCT_END(Instance)
 
 /* aberrations: world_to_local rows (into the unit box [-1/2, 1/2]^3), rotation
- * rows R, deformation.xyz = D, meta = (mode, exit, priority, entity). */
+ * rows R (rot0.w: clearance to every instance, rot1.w: gap to every other box, world
+ * lower bounds from engine/box_clearance.py), deformation.xyz = D, meta = (mode, exit,
+ * priority, entity). */
 STRUCT_BEGIN(Aberration)
     real4 w2l0;
     real4 w2l1;
@@ -166,7 +168,7 @@ STRUCT_END(TlasNode)
 
 /* camera: one row per frame. position is camera-relative; right/up/back are the
  * columns of R_cam; origin is the packed origin (for world-space checkers);
- * lens = (tan(fov/2), aspect, 0, 0); size = (width, height, camera box, 0): the camera box is every
+ * lens = (tan(fov/2), aspect, clearance to every instance's bounds or 0, 0); size = (width, height, camera box, 0): the camera box is every
  * primary ray's active box, or -2 where each ray looks it up (engine.camera_view.camera_box). */
 STRUCT_BEGIN(Camera)
     real4 position;

@@ -1,0 +1,109 @@
+"""How far each aberration box is from every instance and from every other box (docs/semantics.md section 14).
+
+The kernels use both to skip work that provably finds nothing: a mesh search along a segment inside a box
+whose clearance exceeds the segment's reach past the box (the tie window), and the ``containing_box`` loop
+after a face of a box whose gap to every other box exceeds the nudge. Both are lower bounds on the world
+distance (separating-axis test on the face normals of the two solids, less a rounding slack), so a value
+that is too small only costs speed; a value that is too large would be a bug, hence the slack.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from engine.packing import PackedScene
+
+#: Subtracted from every distance, relative to the size of the terms the kernels compute with: far above
+#: float32 rounding of a box's local coordinates (a few 1e-7 of the box's size plus its distance).
+CLEARANCE_SLACK = 1e-4
+
+
+def _box_solids(world_to_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centres (n, 3), half-edge vectors (n, 3 edges, 3) and unit face normals (n, 3, 3) of packed boxes."""
+    m = np.asarray(world_to_local, dtype=np.float64)
+    linear = np.linalg.inv(m[:, :, :3])  # local -> world; columns are the box's edges
+    centre = -np.einsum("nij,nj->ni", linear, m[:, :, 3])
+    half = 0.5 * np.transpose(linear, (0, 2, 1))
+    normals = m[:, :, :3] / np.linalg.norm(m[:, :, :3], axis=2, keepdims=True)
+    return centre, half, normals
+
+
+def _separation(c1: np.ndarray, h1: np.ndarray, c2: np.ndarray, h2: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """The largest gap between two solids along any of ``axes`` (a lower bound on their distance; <= 0 when
+    no axis separates them). Shapes broadcast: centres (..., 3), half edges (..., 3, 3), axes (..., k, 3)."""
+    along = np.abs(np.einsum("...kj,...j->...k", axes, c2 - c1))
+    r1 = np.abs(np.einsum("...kj,...ej->...ke", axes, h1)).sum(axis=-1)
+    r2 = np.abs(np.einsum("...kj,...ej->...ke", axes, h2)).sum(axis=-1)
+    return (along - r1 - r2).max(axis=-1)
+
+
+def box_clearances(
+    world_to_local: np.ndarray, bounds_min: np.ndarray, bounds_max: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per box: (world distance to the nearest instance's bounds, to the nearest other box), lower bounds
+    less the rounding slack, never negative; +inf-free (a scene without instances or other boxes gets 1e30).
+
+    ``world_to_local`` (n, 3, 4) are the packed rows (camera-relative), ``bounds_*`` (m, 3) the instances'
+    world bounds as packed (camera-relative too: distances do not depend on the origin).
+    """
+    n = len(world_to_local)
+    if n == 0:
+        return np.zeros(0), np.zeros(0)
+    centre, half, normals = _box_solids(world_to_local)
+    slack = CLEARANCE_SLACK * (1.0 + np.linalg.norm(centre, axis=1) + 2.0 * np.linalg.norm(half, axis=(1, 2)))
+    far = 1e30
+    instance = np.full(n, far)
+    lo = np.asarray(bounds_min, dtype=np.float64)
+    hi = np.asarray(bounds_max, dtype=np.float64)
+    if len(lo):
+        c2 = 0.5 * (lo + hi)
+        h2 = np.einsum("mj,jk->mjk", 0.5 * (hi - lo), np.eye(3))
+        world = np.broadcast_to(np.eye(3), (len(lo), 3, 3))
+        slack_i = CLEARANCE_SLACK * (np.linalg.norm(c2, axis=1) + np.linalg.norm(hi - lo, axis=1))
+        for b in range(n):
+            axes = np.concatenate([np.broadcast_to(normals[b], (len(lo), 3, 3)), world], axis=1)
+            gap = _separation(centre[b], half[b], c2, h2, axes) - slack_i
+            finite = np.isfinite(gap)
+            instance[b] = gap.min() if finite.all() else 0.0
+    boxes = np.full(n, far)
+    for b in range(n):
+        for c in range(n):
+            if c != b:
+                axes = np.concatenate([normals[b], normals[c]], axis=0)
+                gap = float(_separation(centre[b], half[b], centre[c], half[c], axes)) - slack[c]
+                boxes[b] = min(boxes[b], gap if np.isfinite(gap) else 0.0)
+    instance = np.where(np.isfinite(instance), instance - slack, 0.0)
+    boxes = np.where(np.isfinite(boxes), boxes - slack, 0.0)
+    return np.maximum(instance, 0.0), np.maximum(boxes, 0.0)
+
+
+#: Above this many instances the camera's clearance is not computed (0: every first search runs); the
+#: per-frame cost stays below a millisecond.
+CAMERA_CLEARANCE_MAX_INSTANCES = 65536
+
+
+def instance_bounds(packed: PackedScene) -> tuple[np.ndarray, np.ndarray]:
+    """The live instances' packed world bounds (camera-relative, float64 copies)."""
+    table = packed.tables["instances"][: packed.counts.get("instances", 0)]
+    return table["bounds_min"][:, :3].astype(np.float64), table["bounds_max"][:, :3].astype(np.float64)
+
+
+def camera_clearance(position: np.ndarray, bounds: tuple[np.ndarray, np.ndarray] | None) -> float:
+    """World distance from the camera (camera-relative ``position``) to the nearest instance's bounds, less
+    the rounding slack, or 0 (unknown, or too many instances). The kernels skip the first mesh search
+    when it ends nearer than this (docs/semantics.md section 14)."""
+    if bounds is None:
+        return 0.0
+    lo, hi = bounds
+    if len(lo) > CAMERA_CLEARANCE_MAX_INSTANCES:
+        return 0.0
+    p = np.asarray(position, dtype=np.float64)
+    if len(lo) == 0:
+        return 1e30
+    outside = np.maximum(np.maximum(lo - p, p - hi), 0.0)
+    distance = float(np.sqrt((outside * outside).sum(axis=1)).min())
+    slack = CLEARANCE_SLACK * (1.0 + float(np.linalg.norm(p)) + float(np.abs(np.concatenate([lo, hi])).max()))
+    return max(distance - slack, 0.0) if np.isfinite(distance) else 0.0
