@@ -77,8 +77,9 @@ class Backend(ABC):
 
     #: Whether the packed tables should be relative to a floating origin near the camera.
     camera_relative: ClassVar[bool] = True
-    #: The BVH width its packer should build (``ScenePacker(bvh_width=...)``): what it traverses fastest.
-    bvh_width: ClassVar[int] = 2
+    #: The BVH width its packer should build (``ScenePacker(bvh_width=...)``): what it traverses fastest
+    #: (a backend may set it per instance, e.g. by precision).
+    bvh_width: int = 2
     #: Whether its packer should write binary trees as compact records (``ScenePacker(bvh_compact=...)``).
     bvh_compact: ClassVar[bool] = False
 

@@ -47,7 +47,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bump whenever the builder's output changes, so stale disk caches are ignored.
-BUILDER_VERSION = 1
+BUILDER_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -316,10 +316,24 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     return _frozen(nodes, order.astype(np.int32), params)
 
 
+def _leaf_counts(first: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """Leaves under each node of a binary tree (1 for a leaf), level by level from the bottom."""
+    levels = [np.zeros(1, np.int64)] if inner[0] else []
+    while levels and levels[-1].size:
+        kids = first[levels[-1]]
+        kids = np.concatenate([kids, kids + 1])
+        levels.append(kids[inner[kids]])
+    leaves = np.ones(len(first), np.int64)
+    for level in reversed(levels):
+        leaves[level] = leaves[first[level]] + leaves[first[level] + 1]
+    return leaves
+
+
 def collapse(bvh: Bvh, width: int = 4) -> Bvh:
     """The ``width``-wide tree (4 or 8) of a binary one: each wide node takes a binary node's two
-    children, then pulls up the children of its largest-area inner child until it has ``width`` (or
-    only leaves).
+    children, then pulls up inner children until it has ``width`` (or only leaves): first those inside a
+    subtree of at most ``width`` leaves (so such a subtree's leaves share one wide node), then the
+    largest-area one.
 
     Every pull removes one binary node and its SAH term (largest area first: the dearest to visit);
     leaves and the triangles' order are unchanged. Level-synchronous like the builder: a few array
@@ -333,6 +347,15 @@ def collapse(bvh: Bvh, width: int = 4) -> Bvh:
     first, count = b["first"].astype(np.int64), b["count"].astype(np.int64)
     inner = count == 0
     area = _half_area(b["bounds_min"].T, b["bounds_max"].T)
+    # A subtree of at most `width` leaves is opened whole (its inner nodes are pulled before any other),
+    # so its leaves share one wide node: filling by area alone left most 8-wide nodes of the tori holding
+    # 2 leaves (15408 of 25445 nodes at 200k triangles, now 4040 of 14509; SAH 24.1 -> 23.6; 0.5-1.5 %
+    # less CPU per frame on the tori, PoCL 3.1, 800x800).
+    leaves = _leaf_counts(first, inner)
+    opened = np.zeros(len(b), bool)
+    small = np.flatnonzero(inner & (leaves <= width))
+    opened[first[small]] = opened[first[small] + 1] = True
+    boost = area.max() + 1.0
     rows: list[np.ndarray] = []  # per level: (F, width) binary node ids in the slots, -1 empty
     frontier = np.zeros(1, np.int64)
     if not inner[0]:  # a lone leaf: one wide node holding it
@@ -349,7 +372,7 @@ def collapse(bvh: Bvh, width: int = 4) -> Bvh:
         for used in range(2, width):
             safe = np.maximum(slots, 0)
             pullable = (slots >= 0) & inner[safe]
-            pick = np.argmax(np.where(pullable, area[safe], -1.0), axis=1)
+            pick = np.argmax(np.where(pullable, area[safe] + opened[safe] * boost, -1.0), axis=1)
             can = pullable[r, pick]
             picked = slots[r, pick]
             # Insert the picked node's two children in its place: the left-to-right order stays.

@@ -10,6 +10,7 @@ import os
 import re
 import subprocess
 import sys
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -105,6 +106,26 @@ def test_contract_probe_and_info(opencl):
     assert int(info["compute units"]) >= 1
     if "Portable Computing Language" in info["platform"]:
         assert re.match(r"\d+\.\d+", info["pocl"])
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_bvh_width_follows_the_precision_and_f64_builds_without_compiler_warnings(backend_factory, precision):
+    """8-wide nodes at f32 (float8: one AVX register), 4-wide at f64 (double4: one register; double8 is two
+    and PoCL warns of its ABI on every build). A default build emits no compiler warning (where it builds:
+    a kernel from the cache builds nothing)."""
+    backend = backend_factory("opencl", precision)
+    assert backend.bvh_width == {"f32": 8, "f64": 4}[precision] == ocl.BVH_WIDTH_BY_PRECISION[precision]
+    scene = boxes_scene()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            frame = render(backend, scene)
+    finally:
+        scene.close()
+    assert backend._bvh["BVH_WIDTH"] == backend.bvh_width
+    assert (frame.instance >= 0).any()
+    # pyopencl's CompilerWarning ("Non-empty compiler output") is how the double8 ABI warning shows.
+    assert not [w for w in caught if type(w.message).__name__ == "CompilerWarning"], [str(w.message) for w in caught]
 
 
 def test_no_platform_is_a_clear_error_naming_what_to_install(monkeypatch):
