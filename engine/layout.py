@@ -93,7 +93,7 @@ BVH_NODE_DTYPE = np.dtype(
 #: four children stored SoA, one ``float4`` per bound component (lane i = child
 #: i), so a visit is a few 4-vector min/max operations. ``child[i]`` and
 #: ``count[i]`` say what child i is: ``count > 0``, a leaf of ``count`` triangles
-#: (in the tree from :func:`engine.bvh.collapse`: triangles ``[child, child + count)``;
+#: (in the tree from :func:`engine.bvh_wide.collapse`: triangles ``[child, child + count)``;
 #: packed: ``ceil(count / 4)`` rows of ``triangle_blocks`` from ``child``);
 #: ``count == 0``, the wide node ``child``;
 #: ``count < 0``, an empty slot (its box is a point at the origin: the count,

@@ -23,7 +23,10 @@ import numpy as np
 from components import Aberration, Mesh, Portal, Transform
 from engine import layout
 from engine.box_clearance import box_clearances
-from engine.bvh import BvhParams, cached_bvh, compact, leaf_blocks, offset_compact
+from engine.bvh import BvhParams
+from engine.bvh_cache import cached_bvh
+from engine.bvh_compact import compact, offset_compact
+from engine.bvh_wide import leaf_blocks
 from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize

@@ -8,19 +8,13 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import engine.bvh as bvh_mod
+import engine.bvh_cache as cache_mod
+import engine.bvh_compact as compact_mod
 from engine import layout
-from engine.bvh import (
-    Bvh,
-    BvhParams,
-    build_bvh,
-    cached_bvh,
-    clear_memory_cache,
-    collapse,
-    compact,
-    leaf_blocks,
-    offset_compact,
-)
+from engine.bvh import Bvh, BvhParams, build_bvh
+from engine.bvh_cache import cached_bvh, clear_memory_cache
+from engine.bvh_compact import compact, offset_compact
+from engine.bvh_wide import collapse, leaf_blocks
 from engine.layout import BVH4_NODE_DTYPE, BVH8_NODE_DTYPE, BVH_NODE_DTYPE
 
 # --- meshes ------------------------------------------------------------------
@@ -321,7 +315,7 @@ def test_disk_cache_is_used(tmp_path, fresh_memory, monkeypatch):
     files = sorted((tmp_path / "bvh").iterdir())
     assert len(files) == 1 and files[0].suffix == ".npz", "one file, no temp files left behind"
     clear_memory_cache()
-    monkeypatch.setattr(bvh_mod, "build_bvh", _refuse_to_build)
+    monkeypatch.setattr(cache_mod, "build_bvh", _refuse_to_build)
     _same(cached_bvh(verts, faces, cache_dir=tmp_path), built)
 
 
@@ -343,7 +337,7 @@ def test_corrupt_cache_file_is_rebuilt(tmp_path, fresh_memory, monkeypatch, dama
     clear_memory_cache()
     _same(cached_bvh(verts, faces, cache_dir=tmp_path), good)
     clear_memory_cache()
-    monkeypatch.setattr(bvh_mod, "build_bvh", _refuse_to_build)
+    monkeypatch.setattr(cache_mod, "build_bvh", _refuse_to_build)
     _same(cached_bvh(verts, faces, cache_dir=tmp_path), good)  # the file was rewritten whole
 
 
@@ -553,8 +547,8 @@ def test_wide_trees_are_cached_by_width(tmp_path, fresh_memory, monkeypatch):
     assert binary.width == 2 and wide.width == 4 and wide8.width == 8
     assert len(list((tmp_path / "bvh").glob("*.npz"))) == 3, "the width is part of the key"
     clear_memory_cache()
-    monkeypatch.setattr(bvh_mod, "build_bvh", _refuse_to_build)
-    monkeypatch.setattr(bvh_mod, "collapse", _refuse_to_build)
+    monkeypatch.setattr(cache_mod, "build_bvh", _refuse_to_build)
+    monkeypatch.setattr(cache_mod, "collapse", _refuse_to_build)
     _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=4), wide)
     _same(cached_bvh(verts, faces, cache_dir=tmp_path, width=8), wide8)
     with pytest.raises(ValueError, match="width"):
@@ -598,7 +592,7 @@ def check_compact(records: np.ndarray, binary: Bvh) -> None:
     origin = records["child0"][0, :3].copy().view(np.float32)
     scale = records["child1"][0, :3].copy().view(np.float32)
     assert records["child1"][0, 3] == -1 and (scale >= np.finfo(np.float32).tiny).all()
-    for top in _decodings(np.full(3, bvh_mod.GRID_MAX), origin, scale):
+    for top in _decodings(np.full(3, compact_mod.GRID_MAX), origin, scale):
         assert (top >= nodes["bounds_max"][0]).all() and (origin <= nodes["bounds_min"][0]).all()
     inner = np.flatnonzero(nodes["count"] == 0)
     assert len(records) == 1 + len(inner)
@@ -658,7 +652,7 @@ def test_compact_records_on_float_soups(corners, offset, leaf):
 def test_compact_frame_and_boxes_at_the_edges(lo, hi):
     rng = np.random.default_rng(3)
     root_lo, root_hi = np.array(lo, np.float32), np.array(hi, np.float32)
-    origin, scale = bvh_mod.compact_frame(root_lo, root_hi)
+    origin, scale = compact_mod.compact_frame(root_lo, root_hi)
     assert (scale >= np.finfo(np.float32).tiny).all() and np.isfinite(scale).all()
     # boxes inside the root box: random corners, the root's own bounds, and points on them
     t = rng.uniform(size=(200, 2, 3))
@@ -666,8 +660,8 @@ def test_compact_frame_and_boxes_at_the_edges(lo, hi):
     pts = np.clip(pts, root_lo, root_hi)
     box_lo = np.concatenate([pts.min(axis=1), [root_lo, root_hi, root_lo]])
     box_hi = np.concatenate([pts.max(axis=1), [root_hi, root_hi, root_lo]])
-    qlo, qhi = bvh_mod.compact_boxes(box_lo, box_hi, origin, scale)
-    assert ((qlo >= 0) & (qhi <= bvh_mod.GRID_MAX) & (qlo <= qhi)).all()
+    qlo, qhi = compact_mod.compact_boxes(box_lo, box_hi, origin, scale)
+    assert ((qlo >= 0) & (qhi <= compact_mod.GRID_MAX) & (qlo <= qhi)).all()
     for decoded in _decodings(qlo, origin, scale):
         assert (decoded <= box_lo).all()
     for decoded in _decodings(qhi, origin, scale):
