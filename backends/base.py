@@ -21,7 +21,7 @@ import numpy as np
 from engine.camera_view import CameraView
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packing import PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 
 #: Outputs a backend can write (DESIGN.md section 5).
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")

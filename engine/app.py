@@ -14,7 +14,7 @@ import esper
 from backends.base import AOVS, Backend, Frame
 from engine.errors import AberrantError
 from engine.input import InputSource, NoInput
-from engine.packing import PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
 from systems.camera_movement import SPRINT_MULTIPLIER, CameraMovementProcessor
 from systems.gpu_upload import GpuUploadProcessor

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from engine.packing import PackedScene
+    from engine.packed import PackedScene
 
 #: Subtracted from every distance, relative to the size of the terms the kernels compute with: far above
 #: float32 rounding of a box's local coordinates (a few 1e-7 of the box's size plus its distance).

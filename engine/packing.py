@@ -16,12 +16,11 @@ float32 is fine-grained (1e-6 at 16 units).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from components import Aberration, Mesh, Portal, Transform
 from engine import layout
+from engine.affine_batch import compose_affine, transform_arrays, trs_forward, trs_inverse_batch
 from engine.box_clearance import box_clearances
 from engine.bvh import BvhParams
 from engine.bvh_cache import cached_bvh
@@ -30,103 +29,9 @@ from engine.bvh_wide import leaf_blocks
 from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
+from engine.packed import Features, PackedScene, TableUpdate
 from engine.scene import SETTINGS, Scene
 from engine.tlas import FAT_MARGIN, InstanceTlas
-
-
-@dataclass(frozen=True)
-class Features:
-    """What the scene contains: picks the kernel variant (compile-time defines)."""
-
-    portals: bool = False
-    aberration_modes: frozenset[str] = frozenset()
-    max_events: int = 16
-
-    def defines(self) -> dict[str, int]:
-        return {
-            "HAS_PORTALS": int(self.portals),
-            "HAS_ABERRATIONS": int(bool(self.aberration_modes)),
-            "HAS_METRIC": int("metric" in self.aberration_modes),
-            "HAS_RADIAL": int("radial" in self.aberration_modes),
-            "HAS_ADDITIVE": int("additive" in self.aberration_modes),
-            "MAX_EVENTS": self.max_events,
-        }
-
-
-@dataclass(frozen=True)
-class TableUpdate:
-    """Rows of a table to upload; ``rows is None`` means the whole table (reallocate)."""
-
-    table: str
-    rows: range | None = None
-
-
-@dataclass
-class PackedScene:
-    """The tables, their live row counts (tables never have zero rows), origin and features."""
-
-    precision: Precision
-    origin: np.ndarray
-    tables: dict[str, np.ndarray]
-    counts: dict[str, int]
-    features: Features
-    #: Entity id of each instance row (to map the ``instance`` AOV back, and for tests).
-    instance_entities: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
-    #: Per-table version, bumped on every update of the table.
-    versions: dict[str, int] = field(default_factory=dict)
-
-    def update_bytes(self, updates: list[TableUpdate]) -> int:
-        """Bytes an upload of ``updates`` transfers."""
-        total = 0
-        for u in updates:
-            table = self.tables[u.table]
-            total += table.nbytes if u.rows is None else len(u.rows) * table.dtype.itemsize
-        return total
-
-
-# --- batched transforms ----------------------------------------------------------
-
-
-def _rotation_batch(q: np.ndarray) -> np.ndarray:
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    x, y, z, w = q.T
-    r = np.empty((len(q), 3, 3))
-    r[:, 0] = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1)
-    r[:, 1] = np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1)
-    r[:, 2] = np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1)
-    return r
-
-
-def _transforms(transforms: list[Transform], origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Relative positions (n, 3), rotations (n, 3, 3), scales (n, 3)."""
-    p = np.array([t.position for t in transforms], dtype=np.float64).reshape(-1, 3) - origin
-    r = _rotation_batch(np.array([t.rotation for t in transforms], dtype=np.float64).reshape(-1, 4))
-    s = np.array([t.scale for t in transforms], dtype=np.float64).reshape(-1, 3)
-    return p, r, s
-
-
-def _forward(p: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Batched ``T R S`` as (n, 3, 4)."""
-    m = np.empty((len(p), 3, 4))
-    m[:, :, :3] = r * s[:, None, :]
-    m[:, :, 3] = p
-    return m
-
-
-def _inverse(p: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Batched ``(T R S)^-1 = S^-1 R^T T^-1`` as (n, 3, 4)."""
-    m = np.empty((len(p), 3, 4))
-    m[:, :, :3] = np.transpose(r, (0, 2, 1)) / s[:, :, None]
-    m[:, :, 3] = -np.einsum("nij,nj->ni", m[:, :, :3], p)
-    return m
-
-
-def _compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Batched affine product ``a @ b`` of (n, 3, 4) matrices."""
-    m = np.empty_like(a)
-    m[:, :, :3] = a[:, :, :3] @ b[:, :, :3]
-    m[:, :, 3] = np.einsum("nij,nj->ni", a[:, :, :3], b[:, :, 3]) + a[:, :, 3]
-    return m
 
 
 def _round_out(lo: np.ndarray, hi: np.ndarray, precision: Precision) -> tuple[np.ndarray, np.ndarray]:
@@ -394,10 +299,10 @@ class ScenePacker:
         entities = [int(packed.instance_entities[r]) for r in rows]
         transforms = [scene.get(e, Transform) for e in entities]
         meshes = [scene.get(e, Mesh) for e in entities]
-        p, r, s = _transforms(transforms, packed.origin)
-        forward = _forward(p, r, s)
+        p, r, s = transform_arrays(transforms, packed.origin)
+        forward = trs_forward(p, r, s)
         table = packed.tables["instances"]
-        table["world_to_object"][rows, :, :] = _inverse(p, r, s)
+        table["world_to_object"][rows, :, :] = trs_inverse_batch(p, r, s)
         for i, (row, entity, mesh) in enumerate(zip(rows, entities, meshes, strict=True)):
             asset = scene.asset(mesh.asset)
             lo, hi = asset.bounds()
@@ -458,8 +363,8 @@ class ScenePacker:
         table = np.zeros(max(len(rows), 1), dtype=layout.aberration_dtype(self.precision))
         packed.counts["aberrations"] = len(rows)
         if rows:
-            p, r, s = _transforms([t for _, (t, _) in rows], packed.origin)
-            table["world_to_local"][: len(rows)] = _inverse(p, r, s)
+            p, r, s = transform_arrays([t for _, (t, _) in rows], packed.origin)
+            table["world_to_local"][: len(rows)] = trs_inverse_batch(p, r, s)
             table["rotation"][: len(rows), :, :3] = r
             # rotation[0].w: the box's clearance to every instance, rotation[1].w: its gap to every other box
             # (world distances, lower bounds): the kernels skip the searches they prove empty (box_clearance).
@@ -484,8 +389,8 @@ class ScenePacker:
         table = np.zeros(max(len(rows), 1), dtype=layout.portal_dtype(self.precision))
         packed.counts["portals"] = len(rows)
         if rows:
-            p, r, s = _transforms([t for _, (t, _) in rows], packed.origin)
-            forward, inverse = _forward(p, r, s), _inverse(p, r, s)
+            p, r, s = transform_arrays([t for _, (t, _) in rows], packed.origin)
+            forward, inverse = trs_forward(p, r, s), trs_inverse_batch(p, r, s)
             table["world_to_local"][: len(rows)] = inverse
             targets = np.array(
                 [-1 if portal.target is None else row_of[scene.entity(portal.target)] for _, (_, portal) in rows]
@@ -495,7 +400,7 @@ class ScenePacker:
             identity[:, :, :3] = np.eye(3)
             transfer = identity
             if linked.size:
-                transfer[linked] = _compose(forward[targets[linked]], inverse[linked])
+                transfer[linked] = compose_affine(forward[targets[linked]], inverse[linked])
             table["transfer"][: len(rows)] = transfer
             for i, (entity, _) in enumerate(rows):
                 table["meta"][i] = (targets[i], entity, 0, 0)

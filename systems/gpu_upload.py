@@ -11,7 +11,8 @@ import esper
 
 from backends.base import Backend
 from engine.camera_view import scene_camera
-from engine.packing import PackedScene, ScenePacker
+from engine.packed import PackedScene
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from systems.state import UploadStats
 

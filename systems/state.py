@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from backends.base import Frame
-from engine.packing import TableUpdate
+from engine.packed import TableUpdate
 
 
 @dataclass

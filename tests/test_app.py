@@ -14,7 +14,7 @@ from engine.app import App, render_once
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
 from engine.input import InputSource, InputState, NoInput, ScriptedInput
-from engine.packing import PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
 from systems.camera_movement import CameraMovementProcessor
 from systems.gpu_upload import GpuUploadProcessor

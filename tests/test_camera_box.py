@@ -25,7 +25,8 @@ from test_parity_aberrations import (
 from backends.base import AOVS
 from engine.camera_view import CAMERA_BOX_PER_RAY, camera_box, pack_camera, scene_camera
 from engine.layout import Precision
-from engine.packing import PackedScene, ScenePacker, TableUpdate
+from engine.packed import PackedScene, TableUpdate
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from tests.scenes import render_scene
 

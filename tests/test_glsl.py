@@ -408,7 +408,7 @@ def test_whole_table_updates_reallocate_only_on_a_size_change(fresh_glsl):
     packed = packer.packed
     assert packed is not None
     buffer = fresh_glsl._tables["instances"]
-    from engine.packing import TableUpdate
+    from engine.packed import TableUpdate
 
     written = fresh_glsl.upload(packed, [TableUpdate("instances")])
     assert written == packed.tables["instances"].nbytes
@@ -614,7 +614,7 @@ SPECIALISATIONS = [
 @pytest.mark.parametrize(("modes", "portals"), SPECIALISATIONS)
 def test_a_variant_compiles_only_the_machinery_its_scene_uses(modes, portals):
     """A plain scene's shader has no aberration or portal code at all; each mode brings only its own rules."""
-    from engine.packing import Features
+    from engine.packed import Features
 
     defines = {**Features(portals, frozenset(modes)).defines(), "CAMERA_BINDING": 8, "TABLES_IN_IMAGES": 0}
     assert compiled_functions(GlslBackend.source(defines)) == expected_functions(modes, portals)

@@ -28,7 +28,8 @@ from components import Transform
 from engine import layout
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from engine.packing import ScenePacker, TableUpdate
+from engine.packed import TableUpdate
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -274,7 +275,7 @@ def test_release_is_idempotent_and_final():
 @pytest.mark.parametrize(("modes", "portals"), SPECIALISATIONS)
 def test_a_variant_compiles_only_the_machinery_its_scene_uses(modes, portals):
     """A plain scene's kernel has no aberration or portal code at all; each mode brings only its own rules."""
-    from engine.packing import Features
+    from engine.packed import Features
 
     for precision in (0, 1):
         defines = {**Features(portals, frozenset(modes)).defines(), "REAL_IS_DOUBLE": precision}

@@ -8,7 +8,8 @@ import pytest
 from components import Aberration, Mesh, Portal, Transform
 from engine.camera_view import CameraView, pack_camera
 from engine.maths import quat_from_euler_deg, trs_matrix
-from engine.packing import ScenePacker, TableUpdate
+from engine.packed import TableUpdate
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 

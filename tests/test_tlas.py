@@ -15,7 +15,8 @@ from backends.reference.backend import ReferenceBackend
 from components import Transform
 from engine.camera_view import scene_camera
 from engine.layout import TLAS_NODE_DTYPE
-from engine.packing import ScenePacker, TableUpdate
+from engine.packed import TableUpdate
+from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.tlas import FAT_MARGIN, InstanceTlas
 

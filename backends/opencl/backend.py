@@ -32,7 +32,7 @@ from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packing import Features, PackedScene, TableUpdate
+from engine.packed import Features, PackedScene, TableUpdate
 
 if TYPE_CHECKING:  # pyopencl is imported lazily: importing this module must not need it
     import pyopencl as cl

@@ -17,7 +17,7 @@ from backends.reference.traverse import Geometry
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
 from engine.layout import Precision, bvh_compact, bvh_width
-from engine.packing import Features, PackedScene, TableUpdate
+from engine.packed import Features, PackedScene, TableUpdate
 
 #: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
 _MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes")

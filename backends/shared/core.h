@@ -23,7 +23,7 @@
  *               Bvh8Node by BVH_WIDTH), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i),
  *               TLAS_NODE(i), TRIANGLE_BLOCK(i) (records, from the bindings file)
  *
- * Compile-time defines (engine.packing.Features.defines() and the backend):
+ * Compile-time defines (engine.packed.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
  *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions (issue 5)
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile

@@ -25,7 +25,8 @@ from engine.bench.sweeps import Setting
 from engine.bvh import BvhParams, build_bvh
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import BackendUnavailable
-from engine.packing import PackedScene, ScenePacker, TableUpdate
+from engine.packed import PackedScene, TableUpdate
+from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: What the timed frames read back: the colour image, as the app and the CLI do.

@@ -25,7 +25,7 @@ from components import Transform
 from engine.app import App
 from engine.camera_view import CameraView
 from engine.input import NoInput
-from engine.packing import PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
 
 ENTITIES = 1000
