@@ -3,7 +3,7 @@
 The kernels used to test every instance's world bounds for every search; a
 ray taking several events (aberration faces, portals) searched the meshes
 several times, each a loop over the whole instance table. This tree replaces
-the loop (``nearest_mesh`` in ``backends/shared/core.h``).
+the loop (``nearest_mesh`` in ``backends/shared/instances.h``).
 
 Layout: :data:`engine.layout.TLAS_NODE_DTYPE` (the 32-byte BVH node), root at
 row 0. A leaf (``count == 1``) holds one instance row (``first``); an interior

@@ -655,6 +655,8 @@ def _portal_scene() -> Scene:
 def test_shader_source_is_assembled_from_the_shared_core():
     source = GlslBackend.source({"MAX_EVENTS": 16, "CAMERA_BINDING": 8})
     assert source.startswith("#version 430\n")
-    for name in ("prelude.glsl", "layout.h", "bindings.glsl", "core.h", "main.comp"):
-        assert f"// ---- {name}" in source
-    assert shared.read("core.h") in source
+    order = ("prelude.glsl", "layout.h", "bindings.glsl", *shared.TRACER_FILES, "main.comp")
+    marks = [source.index(f"// ---- {name}") for name in order]
+    assert marks == sorted(marks)  # each file builds on those before it
+    for name in shared.TRACER_FILES:
+        assert shared.read(name) in source, name

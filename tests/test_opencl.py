@@ -302,9 +302,11 @@ def test_each_feature_set_is_its_own_cached_variant(fresh_opencl):
 
 def test_kernel_source_is_assembled_from_the_shared_core():
     source = OpenClBackend.source({"MAX_EVENTS": 16, "REAL_IS_DOUBLE": 0})
-    for name in ("prelude_cl.h", "layout.h", "bindings_cl.h", "core.h", "trace.cl"):
-        assert f"// ---- {name}" in source
-    assert shared.read("core.h") in source
+    order = ("prelude_cl.h", "layout.h", "bindings_cl.h", *shared.TRACER_FILES, "trace.cl")
+    marks = [source.index(f"// ---- {name}") for name in order]
+    assert marks == sorted(marks)  # each file builds on those before it
+    for name in shared.TRACER_FILES:
+        assert shared.read(name) in source, name
     assert "#define MAX_EVENTS 16\n" in source
     assert "#include" not in source  # one self-contained string: the whole cache key
 

@@ -1,6 +1,6 @@
 """Aberrations in the fast backends against the float64 reference (issue 5; docs/semantics.md).
 
-The shared core (backends/shared/core.h) ports the reference's rules one by
+The shared core (backends/shared/*.h) ports the reference's rules one by
 one; here GLSL and OpenCL (float32, and OpenCL float64) render scenes with
 metric, radial and additive boxes (rotated, overlapping, the camera inside
 one, all three exit rules) and must agree with the reference: instance

@@ -8,7 +8,7 @@ on Mesa's llvmpipe, into one RGBA32UI image each (the same bytes, a texel per
 4-vector): llvmpipe reads storage buffers one SIMD lane at a time and images
 with vector gathers, about 13 times faster (``tables="auto"`` picks). The
 shader is assembled from ``#version 430`` + defines + ``prelude.glsl`` + the
-shared ``layout.h`` + ``bindings.glsl`` + the shared ``core.h`` +
+shared ``layout.h`` + ``bindings.glsl`` + the shared tracer files (``shared.TRACER_FILES``) +
 ``main.comp``; every variant (scene features, requested AOVs, precision,
 table store) is compiled once per context and cached.
 """
@@ -69,7 +69,7 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.glsl", "prelude.glsl"),
     ("backends.shared", "layout.h"),
     ("backends.glsl", "bindings.glsl"),
-    ("backends.shared", "core.h"),
+    *(("backends.shared", name) for name in shared.TRACER_FILES),
     ("backends.glsl", "main.comp"),
 )
 

@@ -4,7 +4,7 @@ It runs on PoCL (CPU) here and on any OpenCL GPU elsewhere. The packed tables
 go unchanged into one ``__global`` buffer each (kernel arguments in the order
 of :data:`engine.layout.TABLES`). The kernel source is concatenated from
 defines + ``prelude_cl.h`` + the shared ``layout.h`` + ``bindings_cl.h`` + the
-shared ``core.h`` + ``trace.cl`` (concatenated rather than ``#include``d: the
+shared tracer files (``shared.TRACER_FILES``) + ``trace.cl`` (concatenated rather than ``#include``d: the
 source is then the whole cache key, and no include path has to survive a
 zipped install). Each variant (scene features, precision, traversal stack) is
 built once per context, its :class:`pyopencl.Kernel` created once and kept:
@@ -49,7 +49,7 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.shared", "prelude_cl.h"),
     ("backends.shared", "layout.h"),
     ("backends.shared", "bindings_cl.h"),
-    ("backends.shared", "core.h"),
+    *(("backends.shared", name) for name in shared.TRACER_FILES),
     ("backends.opencl", "trace.cl"),
 )
 #: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.

@@ -22,8 +22,19 @@ import numpy as np
 
 from engine import layout
 
-#: Files of the shared core, in the order they are concatenated (the prelude goes before them).
-CORE_FILES: tuple[str, ...] = ("layout.h", "core.h")
+#: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
+#: and its bindings: each builds on those before it (core.h's records and helpers first, the
+#: kernels' entry point ``trace_pixel`` in journey.h last).
+TRACER_FILES: tuple[str, ...] = (
+    "core.h",
+    "triangle.h",
+    "bvh_binary.h",
+    "bvh_wide.h",
+    "instances.h",
+    "shade.h",
+    "space.h",
+    "journey.h",
+)
 
 
 def read(name: str, package: str = __name__) -> str:

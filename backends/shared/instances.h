@@ -1,0 +1,100 @@
+/* instances.h -- the nearest mesh hit over every instance: the top-level tree over instances
+ * (tlas_nodes), each instance's ray in object space, then its own tree (bvh_binary.h, bvh_wide.h). */
+
+/* The ray (camera-relative world o, d) against one instance: into object space with
+ * world_to_object, the direction left unnormalised so t stays the world t; then the
+ * asset's BVH from its root, nearest child first, with a small stack. */
+FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min)
+{
+    Instance inst = INSTANCE(row);
+    real3 oo = R3(dot(inst.w2o0.xyz, o) + inst.w2o0.w, dot(inst.w2o1.xyz, o) + inst.w2o1.w,
+                  dot(inst.w2o2.xyz, o) + inst.w2o2.w);
+    real3 dd = R3(dot(inst.w2o0.xyz, d), dot(inst.w2o1.xyz, d), dot(inst.w2o2.xyz, d));
+    bool cull = MATERIAL(inst.meta.y).flags.x != 0;
+    ShearedRay sr = shear_ray(oo, dd);
+    int root = inst.meta.x;
+    return traverse_tree(SCENE_PASS best, sr, oo, dd, root, row, cull, t_min);
+}
+
+/* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
+ * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py), nearest child first;
+ * each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
+ * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
+ * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
+FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
+{
+    MeshHit best;
+    best.t = t_max;
+    best.bary = R3S(0.0f);
+    best.instance = -1;
+    best.triangle = -1;
+    int count = SETTINGS.counts.x;
+    if (!(dot(d, d) > REAL(0.0f)) || count == 0) {
+        return best; /* a zero or NaN direction hits nothing */
+    }
+    real3 inv = safe_inverse(d);
+#if USE_TLAS
+    int stack_node[TLAS_STACK_SIZE];
+    real stack_t[TLAS_STACK_SIZE];
+    int sp = 0;
+    TlasNode node = TLAS_NODE(0);
+    bool more = slab_hit(slab(o, inv, TO_REAL3(node.lo.xyz), TO_REAL3(node.hi.xyz)), t_min, best.t);
+    /* While-while, as trace_instance: descend to a leaf, then trace its instance outside the descent
+     * loop, so SIMD lanes (llvmpipe) run the large instance code once per leaf, not per node. */
+    while (more) {
+        while (AS_INT(node.hi.w) == 0 && more) {
+            int first = AS_INT(node.lo.w);
+            TlasNode c0 = TLAS_NODE(first);
+            TlasNode c1 = TLAS_NODE(first + 1);
+            real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
+            real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));
+            bool hit0 = slab_hit(h0, t_min, best.t);
+            bool hit1 = slab_hit(h1, t_min, best.t);
+            if (hit0 || hit1) {
+                /* The nearer child now, the other on the stack (the host sizes it to the tree's depth). */
+                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
+                if (hit0 && hit1 && sp < TLAS_STACK_SIZE) {
+                    stack_node[sp] = second_first ? first : first + 1;
+                    stack_t[sp] = second_first ? h0.x : h1.x;
+                    sp += 1;
+                }
+                node = second_first ? c1 : c0;
+            } else {
+                more = false;
+                while (sp > 0 && !more) {
+                    sp -= 1;
+                    if (stack_t[sp] <= best.t) {
+                        node = TLAS_NODE(stack_node[sp]);
+                        more = true;
+                    }
+                }
+            }
+        }
+        if (more) {
+            /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node
+             * still entered before the best hit, or done. */
+            int row = AS_INT(node.lo.w);
+            real2 h = slab(o, inv, INSTANCE(row).bounds_min.xyz, INSTANCE(row).bounds_max.xyz);
+            if (slab_hit(h, t_min, best.t)) {
+                best = trace_instance(SCENE_PASS best, row, o, d, t_min);
+            }
+            more = false;
+            while (sp > 0 && !more) {
+                sp -= 1;
+                if (stack_t[sp] <= best.t) {
+                    node = TLAS_NODE(stack_node[sp]);
+                    more = true;
+                }
+            }
+        }
+    }
+#else
+    for (int i = 0; i < count; ++i) {
+        real2 h = slab(o, inv, INSTANCE(i).bounds_min.xyz, INSTANCE(i).bounds_max.xyz);
+        if (slab_hit(h, t_min, best.t)) {
+            best = trace_instance(SCENE_PASS best, i, o, d, t_min);
+        }
+    }
+#endif
+    return best;
+}
