@@ -12,7 +12,7 @@ from conftest import require_backend
 
 from backends import shared
 from backends.base import AOVS, backend_class
-from backends.glsl.backend import CAMERA_IMAGE, GlslBackend, _write_texels
+from backends.glsl.backend import CAMERA_IMAGE, GlslBackend, _write_texels, lane_block
 from backends.shared import bvh_depth, stack_size
 from components import Transform
 from engine import layout
@@ -260,6 +260,26 @@ def test_tables_in_images_and_in_storage_buffers_render_the_same(precision):
             frames.append(render(backend, starter.build(), 64, 48))
         finally:
             backend.release()
+    for name in AOVS:
+        np.testing.assert_array_equal(frames[0].aov(name), frames[1].aov(name), err_msg=name)
+
+
+@pytest.mark.parametrize("workgroup", [(8, 8), (16, 16), (12, 6), (6, 6)])
+def test_lane_blocks_trace_every_pixel_once_and_match_rows(workgroup):
+    """Consecutive invocations take 4x2 pixel blocks (rows where 4x2 does not tile the group): on an odd size
+    with partial edge tiles every pixel is written, and the frame is the one of the plain row mapping."""
+    require_backend("glsl")
+    assert lane_block(workgroup) == ((4, 2) if workgroup != (6, 6) else (6, 1))
+    frames = []
+    for rows in (False, True):
+        backend = GlslBackend(workgroup=workgroup)
+        try:
+            if rows:
+                backend.extra_defines = {"LANE_BLOCK_X": workgroup[0], "LANE_BLOCK_Y": 1}
+            frames.append(render(backend, boxes_scene(), 61, 37))
+        finally:
+            backend.release()
+    assert np.all(frames[0].color[..., 3] == 255)  # written: an untouched texel of a new texture is 0
     for name in AOVS:
         np.testing.assert_array_equal(frames[0].aov(name), frames[1].aov(name), err_msg=name)
 

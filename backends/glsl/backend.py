@@ -64,6 +64,20 @@ CAMERA_IMAGE = len(layout.TABLES) + 1
 _SOFTWARE_RENDERERS = ("llvmpipe", "softpipe")
 
 TableStore = Literal["auto", "ssbo", "image"]
+#: Pixels per run of 8 consecutive invocations (one SIMD vector on llvmpipe): a 4x2 block instead of a row
+#: of 8 diverges less in traversal. Interleaved A/B, 800x800 f32, CPU time per frame: mesh-10k 173 -> 169 ms,
+#: mesh-200k 222 -> 216 ms, ten-boxes 106 -> 104 ms (2x4 and Morton order: smaller gains). Same frames.
+LANE_BLOCK: tuple[int, int] = (4, 2)
+
+
+def lane_block(workgroup: tuple[int, int], block: tuple[int, int] = LANE_BLOCK) -> tuple[int, int]:
+    """The pixel block of consecutive invocations for a work-group shape: ``block`` where it tiles the group,
+    else ``(workgroup[0], 1)``, rows (the plain ``gl_GlobalInvocationID`` mapping)."""
+    if workgroup[0] % block[0] == 0 and workgroup[1] % block[1] == 0:
+        return block
+    return (workgroup[0], 1)
+
+
 #: Shader source files, in assembly order (package, name).
 _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.glsl", "prelude.glsl"),
@@ -135,6 +149,7 @@ class GlslBackend(Backend):
                 raise BackendUnavailable(f"glsl backend cannot create an OpenGL 4.3 context: {e}") from e
         self._ctx: moderngl.Context | None = context
         self.workgroup = (int(workgroup[0]), int(workgroup[1]))
+        self.lane_block: tuple[int, int] = lane_block(self.workgroup)
         if tables not in ("auto", "ssbo", "image"):
             raise AberrantError(f"glsl backend: tables must be 'auto', 'ssbo' or 'image', got {tables!r}")
         renderer = str(self._ctx.info.get("GL_RENDERER", "")).lower()
@@ -353,6 +368,8 @@ class GlslBackend(Backend):
             TLAS_STACK_SIZE=self._tlas_stack,
             WORKGROUP_X=self.workgroup[0],
             WORKGROUP_Y=self.workgroup[1],
+            LANE_BLOCK_X=self.lane_block[0],
+            LANE_BLOCK_Y=self.lane_block[1],
             CAMERA_BINDING=CAMERA_BINDING,
             TABLES_IN_IMAGES=int(self.table_store == "image"),
             TABLE_WIDTH=TABLE_WIDTH,
