@@ -231,6 +231,25 @@ def test_caches_go_under_the_project_cache_dir_without_clobbering(monkeypatch, t
     assert ocl.configure_caches() is None
 
 
+def test_pocl_defaults_apply_only_where_the_user_set_nothing(monkeypatch):
+    monkeypatch.delenv("POCL_AFFINITY", raising=False)
+    ocl.configure_runtime()
+    assert os.environ["POCL_AFFINITY"] == "1"
+    monkeypatch.setenv("POCL_AFFINITY", "0")
+    ocl.configure_runtime()
+    assert os.environ["POCL_AFFINITY"] == "0"
+
+
+def test_pocl_defaults_reach_a_fresh_process_before_pocl_starts():
+    """Importing pyopencl through the backend sets them (PoCL reads them once, at its first platform query)."""
+    require_backend("opencl")
+    env = {k: v for k, v in os.environ.items() if k != "POCL_AFFINITY"}
+    code = "import os; from backends.opencl import backend as b; b.platforms(); print(os.environ.get('POCL_AFFINITY'))"
+    result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "1"
+
+
 def test_cli_renders_at_f64_and_fills_the_kernel_cache(tmp_path):
     """A fresh process: ``aberrant render --backend opencl --precision f64``; PoCL's cache lands in the project's."""
     require_backend("opencl")

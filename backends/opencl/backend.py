@@ -72,7 +72,10 @@ _OUTPUT_DTYPES: dict[str, tuple[np.dtype, tuple[int, ...]]] = {
 #: generation, not the scene's numbers, depends on the flag.
 #: No ``-cl-fast-relaxed-math`` or ``-cl-mad-enable``: the core needs inf/NaN semantics and unfused
 #: products for its watertight edge functions.
-#: The BVH width each precision traverses fastest (see ``OpenClBackend.bvh_width``).
+#: The BVH width each precision traverses fastest (see ``OpenClBackend.bvh_width``). The default
+#: ``BvhParams`` build the 8-wide trees too: CPU time per 800x800 frame (mesh-10k / mesh-200k /
+#: ten-boxes, PoCL 3.1) was within 1 % for traversal cost 0.3, 0.5 or 2.0, and worse for leaves of
+#: 8 triangles (+8 % / +5 %) or 2 (+1 % / +5 %).
 BVH_WIDTH_BY_PRECISION: dict[Precision, int] = {"f32": 8, "f64": 4}
 BUILD_OPTIONS: tuple[str, ...] = ("-cl-denorms-are-zero",)
 #: Work-group size on a CPU device (PoCL). Measured on PoCL 3.0, 800x800 frames of three scenes:
@@ -105,8 +108,24 @@ def configure_caches() -> str | None:
     return os.path.join(base, "pyopencl")
 
 
+#: PoCL settings the backend applies when the user has not set them (read once, at PoCL's init).
+#: ``POCL_AFFINITY=1`` pins PoCL's worker threads to cores: PoCL 3.1, 2 cores, 800x800 f32 frames,
+#: 3 alternating processes per setting: wall 82-88 vs 98-113 ms (mesh-10k), 108-140 vs 139-142 ms
+#: (mesh-200k), 60-68 vs 67-78 ms (ten-boxes), CPU time unchanged (108 / 139 / 77 ms), frames
+#: bit-identical. Not set (no consistent gain): POCL_WORK_GROUP_METHOD=loopvec (cbs is unknown
+#: to PoCL 3.1), POCL_MAX_PTHREAD_COUNT=1 or 4, work groups 8x8, 32x8 or the driver's choice.
+POCL_DEFAULTS: dict[str, str] = {"POCL_AFFINITY": "1"}
+
+
+def configure_runtime() -> None:
+    """Apply :data:`POCL_DEFAULTS` where unset; must run before PoCL is first initialised."""
+    for name, value in POCL_DEFAULTS.items():
+        os.environ.setdefault(name, value)
+
+
 def _import_cl() -> Any:
     configure_caches()
+    configure_runtime()
     import pyopencl
 
     return pyopencl
