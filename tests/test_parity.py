@@ -274,6 +274,9 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
         reference.release()
 
 
+# Width 8 at f64 is built here on purpose (the backend uses 4 at f64): PoCL then warns that double8
+# "changes the ABI" without AVX-512, which pyopencl reports only as "Non-empty compiler output".
+@pytest.mark.filterwarnings("ignore:Non-empty compiler output")
 @pytest.mark.parametrize("case", ["imported-mesh", "watertight-sphere", "random-boxes"])
 @pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
 def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, precision, case):
