@@ -10,14 +10,17 @@ cache of reference frames, and small measurements on frames (where a marker is).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 from test_parity import Comparison, assert_clean, compare, render
 
-from backends.base import Backend, Frame
+from backends import shared
+from backends.base import AOVS, Backend, Frame
 from backends.reference.backend import ReferenceBackend
 from components import Aberration, Mesh, Transform
 from engine.maths import trs_inverse
@@ -223,10 +226,81 @@ def singular_pixels(scene: Scene, width: int, height: int, boxes: list[Transform
 def upload_to_reference(scene: Scene) -> ReferenceBackend:
     """A reference backend holding ``scene`` (packed as the reference wants it)."""
     backend = ReferenceBackend()
+    upload(backend, scene)
+    return backend
+
+
+# --- one backend's tables and frames (the backend-contract tests and the per-backend files) -------------
+
+
+def upload(backend: Backend, scene: Scene) -> ScenePacker:
+    """Pack ``scene`` as ``backend`` wants it and upload it; the packer is kept for later syncs."""
     packer = ScenePacker(
         precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
     )
     updates = packer.sync(scene)
     assert packer.packed is not None
     backend.upload(packer.packed, updates)
-    return backend
+    return packer
+
+
+def render_aovs(backend: Backend, scene: Scene, width: int = 48, height: int = 36, aovs=AOVS) -> Frame:
+    """Upload ``scene`` and render it from its own camera (the scene stays open)."""
+    upload(backend, scene)
+    return backend.render(scene_camera(scene), width, height, aovs)
+
+
+def boxes_scene() -> Scene:
+    """A floor, two boxes and a sphere in view: sky and hits, several instances."""
+    scene = Scene("boxes")
+    scene.add_mesh("floor", "plane", scale=(20.0, 1.0, 20.0), checker=0.5)
+    scene.add_mesh("a", "box", position=(-1.5, 0.5, 0.0), color=(0.9, 0.2, 0.2))
+    scene.add_mesh("b", "box", position=(0.0, 0.5, -1.0), euler_deg=(0.0, 30.0, 0.0), color=(0.2, 0.9, 0.2))
+    scene.add_mesh("c", "sphere", position=(1.5, 0.5, 0.0), color=(0.2, 0.2, 0.9))
+    scene.set_camera((0.0, 2.0, 5.0), look_at=(0.0, 0.3, 0.0), fov_deg=60.0)
+    return scene
+
+
+def write_obj(path: Path, vertices, faces) -> Path:
+    """A minimal OBJ file (0-based ``faces``), for meshes no primitive makes."""
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+#: layout.h's record for each packed table, as both fast backends' layout tests read them.
+TABLE_STRUCTS = {
+    "settings": "Settings",
+    "triangles": "Triangle",
+    "triangle_uvs": "TriangleUv",
+    "bvh_nodes": "BvhNode",
+    "instances": "Instance",
+    "materials": "Material",
+    "aberrations": "Aberration",
+    "portals": "Portal",
+    "triangle_blocks": "TriangleBlock",
+    "camera": "Camera",
+    "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
+    "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
+}
+
+
+def layout_members(struct: str) -> list[tuple[str, str]]:
+    """(type, name) of a record's members, parsed from the shared layout.h."""
+    text = shared.read("layout.h")
+    body = re.search(rf"STRUCT_BEGIN\({struct}\)(.*?)STRUCT_END\({struct}\)", text, re.S)
+    assert body is not None, struct
+    return re.findall(r"^\s*(\w+)\s+(\w+);", body.group(1), re.M)
+
+
+def random_rows(dtype: np.dtype, n: int, rng: np.random.Generator) -> np.ndarray:
+    """``n`` rows of ``dtype`` with every field random: a misread offset shows as a wrong word."""
+    rows = np.zeros(n, dtype)
+    for name in dtype.names:
+        field = rows[name]
+        if np.issubdtype(field.dtype, np.floating):
+            rows[name] = rng.normal(size=field.shape) * 100.0
+        else:
+            rows[name] = rng.integers(-1000, 1000, size=field.shape)
+    return rows

@@ -1,4 +1,7 @@
-"""The OpenCL backend: contract, device choice, clear errors, layouts, AOVs, variant cache, uploads, GLSL parity.
+"""The OpenCL backend: device choice, PoCL settings, width by precision, layouts, work groups, GLSL parity.
+
+The contract it shares with GLSL (errors, AOVs, uploads, traversal, specialisation) is in
+tests/test_backend_contract.py.
 
 Accuracy against the reference (f32 and f64) lives in tests/test_parity.py,
 which lists ``opencl`` beside ``glsl``; here the OpenCL-specific behaviour.
@@ -11,26 +14,22 @@ import re
 import subprocess
 import sys
 import warnings
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import test_parity as parity
 from conftest import require_backend
-from test_glsl import SPECIALISATIONS, compiled_functions, expected_functions
+from scenes import TABLE_STRUCTS, boxes_scene, layout_members, random_rows, upload
+from scenes import render_aovs as render
 
 from backends import shared
-from backends.base import AOVS, backend_class
+from backends.base import AOVS
 from backends.opencl import backend as ocl
 from backends.opencl.backend import OpenClBackend
-from components import Transform
 from engine import layout
-from engine.camera_view import CameraView, scene_camera
-from engine.errors import AberrantError, BackendUnavailable
-from engine.packed import TableUpdate
-from engine.packing import ScenePacker
-from engine.scene import Scene
+from engine.camera_view import scene_camera
+from engine.errors import BackendUnavailable
 
 ROOT = Path(__file__).resolve().parent.parent
 PRECISIONS = ["f32", "f64"]
@@ -53,31 +52,6 @@ def fresh_opencl():
     backend.release()
 
 
-def upload(backend, scene: Scene) -> ScenePacker:
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return packer
-
-
-def render(backend, scene: Scene, width: int = 48, height: int = 36, aovs=AOVS):
-    upload(backend, scene)
-    return backend.render(scene_camera(scene), width, height, aovs)
-
-
-def boxes_scene() -> Scene:
-    scene = Scene("boxes")
-    scene.add_mesh("floor", "plane", scale=(20.0, 1.0, 20.0), checker=0.5)
-    scene.add_mesh("a", "box", position=(-1.5, 0.5, 0.0), color=(0.9, 0.2, 0.2))
-    scene.add_mesh("b", "box", position=(0.0, 0.5, -1.0), euler_deg=(0.0, 30.0, 0.0), color=(0.2, 0.9, 0.2))
-    scene.add_mesh("c", "sphere", position=(1.5, 0.5, 0.0), color=(0.2, 0.2, 0.9))
-    scene.set_camera((0.0, 2.0, 5.0), look_at=(0.0, 0.3, 0.0), fov_deg=60.0)
-    return scene
-
-
 class _FakePlatform:
     """A platform whose driver sees no device."""
 
@@ -90,23 +64,7 @@ class _FakePlatform:
         raise cl.RuntimeError("clGetDeviceIDs failed: DEVICE_NOT_FOUND")
 
 
-# --- contract, probe, device choice -----------------------------------------------------------
-
-
-def test_contract_probe_and_info(opencl):
-    assert backend_class("opencl") is OpenClBackend
-    assert OpenClBackend.name == "opencl"
-    assert OpenClBackend.precisions == ("f32", "f64")
-    assert OpenClBackend.camera_relative is True
-    assert OpenClBackend.probe() is None
-    info = opencl.info()
-    for key in ("platform", "device", "type", "opencl", "compute units", "fp64", "precision", "work group"):
-        assert info[key], key
-    assert re.search(r"OpenCL \d+\.\d+", info["opencl"])
-    assert info["fp64"] in ("yes", "no")
-    assert int(info["compute units"]) >= 1
-    if "Portable Computing Language" in info["platform"]:
-        assert re.match(r"\d+\.\d+", info["pocl"])
+# --- width by precision, probe, device choice, PoCL -----------------------------------------------------------
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
@@ -266,41 +224,6 @@ def test_cli_renders_at_f64_and_fills_the_kernel_cache(tmp_path):
         assert any((tmp_path / "cache" / "opencl" / "pocl").rglob("*")), "PoCL cached nothing"
 
 
-def test_render_before_upload_and_bad_arguments_are_clear_errors(fresh_opencl):
-    with pytest.raises(AberrantError, match="upload"):
-        fresh_opencl.render(CameraView(np.zeros(3), np.eye(3), 60.0), 4, 4)
-    scene = boxes_scene()
-    upload(fresh_opencl, scene)
-    with pytest.raises(AberrantError, match="AOV"):
-        fresh_opencl.render(scene_camera(scene), 4, 4, aovs=("colour",))
-    with pytest.raises(AberrantError, match="positive"):
-        fresh_opencl.render(scene_camera(scene), 0, 4)
-    packer = ScenePacker(precision="f64")
-    packer.sync(scene)
-    assert packer.packed is not None
-    with pytest.raises(AberrantError, match="f64"):
-        fresh_opencl.upload(packer.packed, [])
-
-
-def test_release_is_idempotent_and_final():
-    require_backend("opencl")
-    backend = OpenClBackend()
-    backend.release()
-    backend.release()
-    with pytest.raises(AberrantError, match="release"):
-        upload(backend, boxes_scene())
-
-
-@pytest.mark.parametrize(("modes", "portals"), SPECIALISATIONS)
-def test_a_variant_compiles_only_the_machinery_its_scene_uses(modes, portals):
-    """A plain scene's kernel has no aberration or portal code at all; each mode brings only its own rules."""
-    from engine.packed import Features
-
-    for precision in (0, 1):
-        defines = {**Features(portals, frozenset(modes)).defines(), "REAL_IS_DOUBLE": precision}
-        assert compiled_functions(OpenClBackend.source(defines)) == expected_functions(modes, portals)
-
-
 def test_each_feature_set_is_its_own_cached_variant(fresh_opencl):
     """Plain, radial and portal-with-aberration scenes build one variant each, with the defines they need."""
     radial = boxes_scene()
@@ -319,17 +242,6 @@ def test_each_feature_set_is_its_own_cached_variant(fresh_opencl):
     ]
 
 
-def test_kernel_source_is_assembled_from_the_shared_core():
-    source = OpenClBackend.source({"MAX_EVENTS": 16, "REAL_IS_DOUBLE": 0})
-    order = ("prelude_cl.h", "layout.h", "bindings_cl.h", *shared.TRACER_FILES, "trace.cl")
-    marks = [source.index(f"// ---- {name}") for name in order]
-    assert marks == sorted(marks)  # each file builds on those before it
-    for name in shared.TRACER_FILES:
-        assert shared.read(name) in source, name
-    assert "#define MAX_EVENTS 16\n" in source
-    assert "#include" not in source  # one self-contained string: the whole cache key
-
-
 def test_kernel_arguments_follow_the_table_order():
     text = shared.read("trace.cl", "backends.opencl")
     signature = re.search(r"__kernel void trace\((.*?)\)", text, re.S)
@@ -341,18 +253,7 @@ def test_kernel_arguments_follow_the_table_order():
 # --- layouts: the kernel's records read exactly the packed bytes ------------------------------------
 
 _TABLE_STRUCTS = {
-    "settings": "Settings",
-    "triangles": "Triangle",
-    "triangle_uvs": "TriangleUv",
-    "bvh_nodes": "BvhNode",
-    "instances": "Instance",
-    "materials": "Material",
-    "aberrations": "Aberration",
-    "portals": "Portal",
-    "triangle_blocks": "TriangleBlock",
-    "camera": "Camera",
-    "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
-    "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
+    **TABLE_STRUCTS,
     "bvh8_nodes": "Bvh8Node",  # bvh_nodes packed with bvh_width=8 (float8 / int8 members)
 }
 _SPECIAL_NODES = {
@@ -360,24 +261,6 @@ _SPECIAL_NODES = {
     "bvh8_nodes": layout.BVH8_NODE_DTYPE,
     "bvh_compact_nodes": layout.BVH_COMPACT_NODE_DTYPE,
 }
-
-
-def _members(struct: str) -> list[tuple[str, str]]:
-    text = shared.read("layout.h")
-    body = re.search(rf"STRUCT_BEGIN\({struct}\)(.*?)STRUCT_END\({struct}\)", text, re.S)
-    assert body is not None, struct
-    return re.findall(r"^\s*(\w+)\s+(\w+);", body.group(1), re.M)
-
-
-def _random_rows(dtype: np.dtype, n: int, rng: np.random.Generator) -> np.ndarray:
-    rows = np.zeros(n, dtype)
-    for name in dtype.names:
-        field = rows[name]
-        if np.issubdtype(field.dtype, np.floating):
-            rows[name] = rng.normal(size=field.shape) * 100.0
-        else:
-            rows[name] = rng.integers(-1000, 1000, size=field.shape)
-    return rows
 
 
 @pytest.mark.parametrize("precision", PRECISIONS)
@@ -388,9 +271,9 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
 
     for table, struct in _TABLE_STRUCTS.items():
         dtype = _SPECIAL_NODES[table] if table in _SPECIAL_NODES else layout.table_dtype(table, precision)
-        rows = _random_rows(dtype, 5, np.random.default_rng(7))
+        rows = random_rows(dtype, 5, np.random.default_rng(7))
         stores, words = [], 0
-        for kind, member in _members(struct):
+        for kind, member in layout_members(struct):
             lanes = [f"s{k}" for k in range(8)] if kind.endswith("8") else list("xyzw")
             for c in lanes:
                 value = f"rows[i].{member}.{c}"
@@ -431,51 +314,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision):
         np.testing.assert_array_equal(got, expected, err_msg=table)
 
 
-# --- AOVs ----------------------------------------------------------------------------------------
-
-
-@pytest.mark.parametrize("precision", PRECISIONS)
-def test_aov_shapes_dtypes_and_no_nan(backend_factory, precision):
-    backend = backend_factory("opencl", precision)
-    scene = boxes_scene()
-    frame = render(backend, scene, 40, 30)
-    assert frame.present() == list(AOVS)
-    assert frame.color.shape == (30, 40, 4) and frame.color.dtype == np.uint8
-    for name, dtype in (("depth", np.float32), ("perceived", np.float32), ("instance", np.int32), ("events", np.uint8)):
-        assert frame.aov(name).shape == (30, 40) and frame.aov(name).dtype == dtype, name
-    hit = frame.instance >= 0
-    assert hit.any() and (~hit).any()
-    for name in ("depth", "perceived"):
-        value = frame.aov(name)
-        assert not np.isnan(value).any()
-        assert np.all(np.isfinite(value[hit])) and np.all(value[hit] > 0)
-        assert np.all(value[~hit] == np.inf)
-    assert np.all(frame.color[..., 3] == 255)
-    assert np.all(frame.events == 0)
-    entities = {scene.entity(n) for n in ("floor", "a", "b", "c")}
-    assert set(np.unique(frame.instance[hit]).tolist()) <= entities
-    for key in ("dispatch", "readback", "render"):
-        assert frame.timings_ms[key] > 0
-
-
-def test_row_zero_is_top(opencl):
-    scene = Scene()
-    scene.add_mesh("floor", "plane", scale=(50.0, 1.0, 50.0))
-    scene.set_camera((0.0, 1.0, 0.0), rotation=(0.0, 0.0, 0.0, 1.0), fov_deg=90.0)
-    instance = render(opencl, scene, 16, 16, aovs=("instance",)).instance
-    assert np.all(instance[:8] == -1) and np.all(instance[8:] >= 0)  # the floor is below the horizon
-
-
-def test_only_requested_aovs_are_read_back_and_agree_with_a_full_frame(opencl):
-    scene = boxes_scene()
-    full = render(opencl, scene)
-    frame = render(opencl, scene, aovs=("depth",))
-    assert frame.present() == ["depth"]
-    np.testing.assert_array_equal(frame.depth, full.depth)
-    frame = render(opencl, scene, aovs=("events", "color"))
-    assert frame.present() == ["color", "events"]
-    np.testing.assert_array_equal(frame.color, full.color)
-    assert render(opencl, scene, aovs=()).present() == []
+# --- work groups ----------------------------------------------------------------------------------
 
 
 def test_odd_sizes_and_any_work_group_size_give_the_same_frame(opencl):
@@ -528,140 +367,6 @@ def test_a_variant_is_built_once_and_its_kernel_object_kept(fresh_opencl, monkey
     fresh_opencl.render(camera, 32, 24)
     assert fresh_opencl.compile_count == 2 and len(made) == 2
     assert launched[4:] == [id(made[1]), id(made[1]), id(made[0])]
-
-
-def test_frames_of_one_size_reuse_their_buffers(fresh_opencl):
-    scene = boxes_scene()
-    upload(fresh_opencl, scene)
-    camera = scene_camera(scene)
-    fresh_opencl.render(camera, 32, 24)
-    outputs, camera_buffer = dict(fresh_opencl._outputs), fresh_opencl._camera
-    first = fresh_opencl.render(camera, 32, 24)
-    second = fresh_opencl.render(camera, 32, 24)
-    assert fresh_opencl._camera is camera_buffer
-    assert set(outputs) == set(AOVS)
-    assert all(fresh_opencl._outputs[name] is buffer for name, buffer in outputs.items())
-    for name in AOVS:
-        np.testing.assert_array_equal(first.aov(name), second.aov(name))
-        assert first.aov(name) is not second.aov(name)  # frames own their arrays
-    fresh_opencl.render(camera, 16, 24)
-    assert all(fresh_opencl._outputs[name] is not buffer for name, buffer in outputs.items())
-
-
-# --- uploads ---------------------------------------------------------------------------------------
-
-
-def test_row_range_upload_writes_only_those_rows(fresh_opencl):
-    scene = boxes_scene()
-    packer = upload(fresh_opencl, scene)
-    packed = packer.packed
-    assert packed is not None
-    itemsize = packed.tables["instances"].dtype.itemsize
-    before = fresh_opencl.read_table("instances")
-    buffer = fresh_opencl._tables["instances"]
-    entity = scene.entity("b")
-    t = scene.get(entity, Transform)
-    scene.set(entity, replace(t, position=(0.05, 0.5, -1.05)))  # within its fat TLAS leaf: one row
-    updates = packer.sync(scene)
-    row = int(np.flatnonzero(packed.instance_entities == entity)[0])
-    assert [(u.table, u.rows) for u in updates] == [("instances", range(row, row + 1))]
-    # Scribble over every other host row: an upload that wrote them would carry the scribbles.
-    table = packed.tables["instances"]
-    saved = table.copy()
-    others = [r for r in range(len(table)) if r != row]
-    table["meta"][others] = -12345
-    assert fresh_opencl.upload(packed, updates) == itemsize
-    after = fresh_opencl.read_table("instances")
-    assert fresh_opencl._tables["instances"] is buffer  # no reallocation
-    for r in range(len(table)):
-        span = slice(r * itemsize, (r + 1) * itemsize)
-        if r == row:
-            assert after[span] == table[r : r + 1].tobytes() != before[span]
-        else:
-            assert after[span] == before[span]
-    table[others] = saved[others]
-    assert packer.sync(scene) == []  # the static tick after it uploads nothing
-    assert fresh_opencl.upload(packed, []) == 0
-    # The moved box is where a fresh backend sees it.
-    moved = fresh_opencl.render(scene_camera(scene), 48, 36)
-    with OpenClBackend() as other:
-        expected = render(other, scene, 48, 36)
-    for name in AOVS:
-        np.testing.assert_array_equal(moved.aov(name), expected.aov(name), err_msg=name)
-
-
-def test_whole_table_updates_reallocate_only_on_a_size_change(fresh_opencl):
-    scene = boxes_scene()
-    packer = upload(fresh_opencl, scene)
-    packed = packer.packed
-    assert packed is not None
-    buffer = fresh_opencl._tables["instances"]
-    mesh_buffers = {name: fresh_opencl._tables[name] for name in ("triangles", "bvh_nodes")}
-    written = fresh_opencl.upload(packed, [TableUpdate("instances")])
-    assert written == packed.tables["instances"].nbytes
-    assert fresh_opencl._tables["instances"] is buffer  # same size: written in place
-    assert all(fresh_opencl._tables[name] is b for name, b in mesh_buffers.items())  # mesh data untouched
-    scene.add_mesh("d", "box", position=(0.0, 2.0, 0.0))
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    fresh_opencl.upload(packer.packed, updates)
-    assert fresh_opencl._tables["instances"] is not buffer
-    assert fresh_opencl.read_table("instances") == packer.packed.tables["instances"].tobytes()
-    frame = fresh_opencl.render(scene_camera(scene), 32, 24, aovs=("instance",))
-    assert scene.entity("d") in frame.instance
-
-
-# --- traversal -------------------------------------------------------------------------------------
-
-
-def test_deep_bvh_gets_a_deep_enough_stack_and_matches_brute_force(fresh_opencl, tmp_path):
-    """Triangles at distances 16^k along each axis make the SAH builder peel one per level: a deep tree."""
-    verts, faces = [], []
-    for axis in range(3):
-        for k in range(1, 30):
-            p, e1, e2 = np.zeros(3), np.zeros(3), np.zeros(3)
-            p[axis], e1[(axis + 1) % 3], e2[(axis + 2) % 3] = 16.0**k, 0.4, 0.4
-            faces.append((len(verts), len(verts) + 1, len(verts) + 2))
-            verts += [tuple(p), tuple(p + e1), tuple(p + e2)]
-    for k in range(10):  # what the camera sees, at the bottom of the tree
-        faces.append((len(verts), len(verts) + 1, len(verts) + 2))
-        verts += [(k * 0.5, -0.5, 0.0), (k * 0.5 + 0.4, -0.5, 0.0), (k * 0.5, 0.5, 0.0)]
-    path = tmp_path / "strip.obj"
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
-    path.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]) + "\n")
-    scene = Scene()
-    scene.add_asset("strip", path=path)
-    scene.add_mesh("strip", "strip")
-    scene.set_camera((2.5, 0.0, 3.0), look_at=(2.5, 0.0, 0.0), fov_deg=70.0)
-    packer = upload(fresh_opencl, scene)
-    assert packer.packed is not None
-    need = shared.stack_entries(packer.packed.tables["bvh_nodes"], packer.packed.counts["bvh_nodes"])
-    assert need > 33
-    assert fresh_opencl._defines()["BVH_STACK_SIZE"] >= need
-    frame = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))
-    fresh_opencl.extra_defines = {"BRUTE_FORCE": 1}
-    brute = fresh_opencl.render(scene_camera(scene), 64, 48, aovs=("instance", "depth"))
-    assert (frame.instance >= 0).sum() > 200
-    np.testing.assert_array_equal(frame.instance, brute.instance)
-    np.testing.assert_array_equal(frame.depth, brute.depth)
-
-
-def test_degenerate_triangles_and_edge_on_views_give_no_nan(opencl, tmp_path):
-    verts = [(0, 0, 0), (1, 1, 0), (2, 2, 0), (-1, -1, 0.5), (1, -1, 0.5), (0, 1, 0.5)]
-    faces = [(0, 1, 2), (0, 0, 1), (3, 4, 5), (1, 1, 1)]
-    path = tmp_path / "bad.obj"
-    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in verts]
-    path.write_text("\n".join(lines + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]) + "\n")
-    scene = Scene()
-    scene.add_asset("bad", path=path)
-    entity = scene.add_mesh("bad", "bad", checker=0.3)
-    scene.add_mesh("edge_on", "quad", position=(0.0, 0.0, -2.0), euler_deg=(90.0, 0.0, 0.0), checker=0.1)
-    scene.set_camera((0.0, 0.0, 3.0), look_at=(0.0, 0.0, 0.0), fov_deg=60.0)
-    frame = render(opencl, scene, 33, 33)  # the middle row looks exactly along the edge-on quad's plane
-    assert set(np.unique(frame.instance).tolist()) == {-1, entity}
-    for name in ("depth", "perceived"):
-        value = frame.aov(name)
-        assert not np.isnan(value).any() and np.all(np.isfinite(value[frame.instance >= 0]))
 
 
 # --- against the GLSL backend: the same core, so the same picture ---------------------------------
