@@ -26,11 +26,10 @@ import numpy as np
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from engine import layout
-from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packed import Features, PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 
 if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
     import moderngl
@@ -114,7 +113,7 @@ def _write_texels(image: moderngl.Texture, first: int, texels: np.ndarray) -> No
 GLSL_BVH_WIDTHS: tuple[int, ...] = (2, 4)
 
 
-class GlslBackend(Backend):
+class GlslBackend(shared.UploadedScene, Backend):
     """Traces with the shared core in an OpenGL 4.3 compute shader (moderngl)."""
 
     name: ClassVar[str] = "glsl"
@@ -162,14 +161,7 @@ class GlslBackend(Backend):
         self.table_store: str = tables
         self._tables: dict[str, moderngl.Buffer | moderngl.Texture] = {}
         self._table_bytes: dict[str, int] = {}
-        self._counts: dict[str, int] = {}
-        self._origin = np.zeros(3)
-        self._boxes: np.ndarray | None = None
-        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
-        self._features = Features()
-        self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
-        self._tlas_stack = shared.MIN_TLAS_STACK
-        self._uploaded = False
+        self._forget_upload()
         with self._current():
             camera_bytes = layout.camera_dtype(self.precision).itemsize
             if self.table_store == "image":
@@ -267,6 +259,7 @@ class GlslBackend(Backend):
                 f"bvh_width={self.bvh_width} (ScenePacker)"
             )
         written = 0
+        rewritten: set[str] = set()
         todo = list(updates)
         listed = {u.table for u in todo}
         todo += [TableUpdate(name) for name in layout.TABLES if name not in self._tables and name not in listed]
@@ -281,23 +274,11 @@ class GlslBackend(Backend):
                 if whole:
                     self._write_whole(update.table, table)
                     written += table.nbytes
+                    rewritten.add(update.table)
                 else:
                     assert update.rows is not None
                     written += self._write_rows(update.table, table, update.rows)
-                if update.table == "bvh_nodes" and whole:
-                    self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
-                if update.table == "tlas_nodes" and whole:
-                    self._tlas_stack = shared.tlas_stack_size(
-                        packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0)
-                    )
-        self._counts = dict(packed.counts)
-        self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
-        # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
-        self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
-        # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
-        self._bounds = instance_bounds(packed)
-        self._features = packed.features
-        self._uploaded = True
+        self._note_upload(packed, rewritten)
         return written
 
     def _image(self, texels: int) -> moderngl.Texture:

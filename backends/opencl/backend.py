@@ -28,11 +28,10 @@ import numpy as np
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from engine import layout
-from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packed import Features, PackedScene, TableUpdate
+from engine.packed import PackedScene, TableUpdate
 
 if TYPE_CHECKING:  # pyopencl is imported lazily: importing this module must not need it
     import pyopencl as cl
@@ -210,7 +209,7 @@ def pocl_version(platform: cl.Platform) -> str | None:
 # --- the backend -------------------------------------------------------------------------
 
 
-class OpenClBackend(Backend):
+class OpenClBackend(shared.UploadedScene, Backend):
     """Traces with the shared core in an OpenCL C kernel (pyopencl)."""
 
     name: ClassVar[str] = "opencl"
@@ -256,14 +255,7 @@ class OpenClBackend(Backend):
         self._ctx: cl.Context | None = cl.Context([self.device])
         self._queue = cl.CommandQueue(self._ctx)
         self._tables: dict[str, cl.Buffer] = {}
-        self._counts: dict[str, int] = {}
-        self._origin = np.zeros(3)
-        self._boxes: np.ndarray | None = None
-        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
-        self._features = Features()
-        self._bvh = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": shared.MIN_STACK}
-        self._tlas_stack = shared.MIN_TLAS_STACK
-        self._uploaded = False
+        self._forget_upload()
         mf = cl.mem_flags
         self._camera = cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
         self._camera_row: np.ndarray | None = None  # kept alive while its non-blocking copy runs
@@ -347,6 +339,7 @@ class OpenClBackend(Backend):
         cl = self._cl
         ctx = self._context()
         written = 0
+        rewritten: set[str] = set()
         todo = list(updates)
         listed = {u.table for u in todo}
         todo += [TableUpdate(name) for name in layout.TABLES if name not in self._tables and name not in listed]
@@ -363,25 +356,13 @@ class OpenClBackend(Backend):
                     flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
                     self._tables[update.table] = cl.Buffer(ctx, flags, hostbuf=table)
                 written += table.nbytes
+                rewritten.add(update.table)
             else:
                 assert buffer is not None and update.rows is not None
                 rows = table[update.rows.start : update.rows.stop]
                 cl.enqueue_copy(self._queue, buffer, rows, dst_offset=update.rows.start * table.dtype.itemsize)
                 written += rows.nbytes
-            if update.table == "bvh_nodes" and whole:
-                self._bvh = shared.bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
-            if update.table == "tlas_nodes" and whole:
-                self._tlas_stack = shared.tlas_stack_size(
-                    packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0)
-                )
-        self._counts = dict(packed.counts)
-        self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
-        # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
-        self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
-        # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
-        self._bounds = instance_bounds(packed)
-        self._features = packed.features
-        self._uploaded = True
+        self._note_upload(packed, rewritten)
         return written
 
     # --- programs -----------------------------------------------------------------------

@@ -21,6 +21,8 @@ from importlib import resources
 import numpy as np
 
 from engine import layout
+from engine.box_clearance import instance_bounds
+from engine.packed import Features, PackedScene
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
 #: and its bindings: each builds on those before it (core.h's records and helpers first, the
@@ -148,3 +150,33 @@ def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
     """``TLAS_STACK_SIZE`` for a ``tlas_nodes`` table: its depth fits (a SAH/median tree: about log2 of the
     instances), rounded up so few variants exist."""
     return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)
+
+
+class UploadedScene:
+    """Mixin of the fast backends: what they keep of their last upload. The tree defines, stack sizes
+    and features pick the kernel variant; origin, boxes and instance bounds pack the camera row."""
+
+    def _forget_upload(self) -> None:
+        self._counts: dict[str, int] = {}
+        self._origin = np.zeros(3)
+        self._boxes: np.ndarray | None = None
+        self._bounds: tuple[np.ndarray, np.ndarray] | None = None
+        self._features = Features()
+        self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
+        self._tlas_stack = MIN_TLAS_STACK
+        self._uploaded = False
+
+    def _note_upload(self, packed: PackedScene, rewritten: set[str]) -> None:
+        """After an upload; ``rewritten``: the tables written whole (a tree table's depth may have changed)."""
+        if "bvh_nodes" in rewritten:
+            self._bvh = bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
+        if "tlas_nodes" in rewritten:
+            self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
+        self._counts = dict(packed.counts)
+        self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
+        # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
+        self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
+        # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
+        self._bounds = instance_bounds(packed)
+        self._features = packed.features
+        self._uploaded = True

@@ -188,33 +188,9 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
     int count = AS_INT(node.hi.w);
     while (!done) {
         while (count == 0 && !done) {
-            BvhNode c0 = BVH_NODE(first);
-            BvhNode c1 = BVH_NODE(first + 1);
-            real2 h0 = slab(oo, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
-            real2 h1 = slab(oo, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));
-            bool hit0 = slab_hit(h0, t_min, best.t);
-            bool hit1 = slab_hit(h1, t_min, best.t);
-            if (hit0 || hit1) {
-                /* Visit the nearer child now, push the other (the host checks the depth fits). */
-                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
-                if (hit0 && hit1 && sp < BVH_STACK_SIZE) {
-                    stack_node[sp] = second_first ? first : first + 1;
-                    stack_t[sp] = second_first ? h0.x : h1.x;
-                    sp += 1;
-                }
-                node = second_first ? c1 : c0;
-            } else {
-                /* Pop the next node still entered before the best hit. */
-                bool found = false;
-                while (sp > 0 && !found) {
-                    sp -= 1;
-                    if (stack_t[sp] <= best.t) {
-                        node = BVH_NODE(stack_node[sp]);
-                        found = true;
-                    }
-                }
-                done = !found;
-            }
+            bool found;
+            BINARY_STEP(BvhNode, BVH_NODE, BVH_STACK_SIZE, oo, inv, first, found)
+            done = !found;
             first = AS_INT(node.lo.w);
             count = AS_INT(node.hi.w);
         }
@@ -222,14 +198,8 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
             for (int k = first; k < first + count; ++k) {
                 best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
             }
-            bool found = false;
-            while (sp > 0 && !found) {
-                sp -= 1;
-                if (stack_t[sp] <= best.t) {
-                    node = BVH_NODE(stack_node[sp]);
-                    found = true;
-                }
-            }
+            bool found;
+            BINARY_POP(BVH_NODE, found)
             done = !found;
             first = AS_INT(node.lo.w);
             count = AS_INT(node.hi.w);

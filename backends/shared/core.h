@@ -254,6 +254,44 @@ bool slab_hit(real2 h, real t_min, real t_max)
     return h.y >= max(h.x, t_min) && h.x <= t_max;
 }
 
+/* The steps of a binary tree's "while-while" traversal (an asset's plain tree, the tree over
+ * instances), over the caller's stacks stack_node / stack_t and its node, sp and best (macros: the
+ * subset cannot pass arrays by reference). BINARY_POP: the next stacked node entered no later than
+ * best.t into node (a NODE, read with FETCH); found tells whether there was one. BINARY_STEP: from the
+ * interior node whose children are first and first + 1, to the nearer child the ray enters within
+ * (t_min, best.t], the other stacked (up to STACK entries: the host sizes stacks to the tree's
+ * depth); neither entered: BINARY_POP. o, inv: the ray in the tree's space. */
+#define BINARY_POP(FETCH, found)                                                                     \
+    found = false;                                                                                   \
+    while (sp > 0 && !found) {                                                                       \
+        sp -= 1;                                                                                     \
+        if (stack_t[sp] <= best.t) {                                                                 \
+            node = FETCH(stack_node[sp]);                                                            \
+            found = true;                                                                            \
+        }                                                                                            \
+    }
+#define BINARY_STEP(NODE, FETCH, STACK, o, inv, first, found)                                        \
+    {                                                                                                \
+        NODE c0 = FETCH(first);                                                                      \
+        NODE c1 = FETCH(first + 1);                                                                  \
+        real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));                           \
+        real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));                           \
+        bool hit0 = slab_hit(h0, t_min, best.t);                                                     \
+        bool hit1 = slab_hit(h1, t_min, best.t);                                                     \
+        if (hit0 || hit1) {                                                                          \
+            bool second_first = hit1 && (!hit0 || h1.x < h0.x);                                      \
+            if (hit0 && hit1 && sp < STACK) {                                                        \
+                stack_node[sp] = second_first ? first : first + 1;                                   \
+                stack_t[sp] = second_first ? h0.x : h1.x;                                            \
+                sp += 1;                                                                             \
+            }                                                                                        \
+            node = second_first ? c1 : c0;                                                           \
+            found = true;                                                                            \
+        } else {                                                                                     \
+            BINARY_POP(FETCH, found)                                                                 \
+        }                                                                                            \
+    }
+
 /* The axis of the largest |v| component; ties go to the first (NumPy's argmax). */
 int dominant_axis(real3 v)
 {

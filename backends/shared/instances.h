@@ -44,31 +44,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     while (more) {
         while (AS_INT(node.hi.w) == 0 && more) {
             int first = AS_INT(node.lo.w);
-            TlasNode c0 = TLAS_NODE(first);
-            TlasNode c1 = TLAS_NODE(first + 1);
-            real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));
-            real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));
-            bool hit0 = slab_hit(h0, t_min, best.t);
-            bool hit1 = slab_hit(h1, t_min, best.t);
-            if (hit0 || hit1) {
-                /* The nearer child now, the other on the stack (the host sizes it to the tree's depth). */
-                bool second_first = hit1 && (!hit0 || h1.x < h0.x);
-                if (hit0 && hit1 && sp < TLAS_STACK_SIZE) {
-                    stack_node[sp] = second_first ? first : first + 1;
-                    stack_t[sp] = second_first ? h0.x : h1.x;
-                    sp += 1;
-                }
-                node = second_first ? c1 : c0;
-            } else {
-                more = false;
-                while (sp > 0 && !more) {
-                    sp -= 1;
-                    if (stack_t[sp] <= best.t) {
-                        node = TLAS_NODE(stack_node[sp]);
-                        more = true;
-                    }
-                }
-            }
+            BINARY_STEP(TlasNode, TLAS_NODE, TLAS_STACK_SIZE, o, inv, first, more)
         }
         if (more) {
             /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node
@@ -78,14 +54,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
             if (slab_hit(h, t_min, best.t)) {
                 best = trace_instance(SCENE_PASS best, row, o, d, t_min);
             }
-            more = false;
-            while (sp > 0 && !more) {
-                sp -= 1;
-                if (stack_t[sp] <= best.t) {
-                    node = TLAS_NODE(stack_node[sp]);
-                    more = true;
-                }
-            }
+            BINARY_POP(TLAS_NODE, more)
         }
     }
 #else

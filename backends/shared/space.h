@@ -22,6 +22,19 @@ real3 normalize_or_keep(real3 v, real3 previous)
     return (len >= MIN_NORM && len < REAL_MAX) ? v / len : previous;
 }
 
+/* What a search returns when nothing is crossed (t = REAL_MAX). */
+Event no_event()
+{
+    Event none;
+    none.t = REAL_MAX;
+    none.kind = EVENT_NONE;
+    none.row = -1;
+    none.far = -REAL_MAX;
+    none.gap = REAL(0.0f);
+    none.clear = REAL(0.0f);
+    return none;
+}
+
 bool same_direction(real3 a, real3 b)
 {
     return a.x == b.x && a.y == b.y && a.z == b.z;
@@ -78,13 +91,7 @@ BoxSpan box_axis(BoxSpan span, real a, real v, int k)
  * lower row, then the entry face. */
 FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
-    Event best;
-    best.t = REAL_MAX;
-    best.kind = EVENT_NONE;
-    best.row = -1;
-    best.far = -REAL_MAX;
-    best.gap = REAL(0.0f);
-    best.clear = REAL(0.0f);
+    Event best = no_event();
     int count = SETTINGS.counts.y;
     for (int b = 0; b < count; ++b) {
         Aberration box = ABERRATION(b);
@@ -288,13 +295,7 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
  * go to the lower row. */
 FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
-    Event best;
-    best.t = REAL_MAX;
-    best.kind = EVENT_NONE;
-    best.row = -1;
-    best.far = -REAL_MAX;
-    best.gap = REAL(0.0f);
-    best.clear = REAL(0.0f);
+    Event best = no_event();
     int count = SETTINGS.counts.z;
     for (int p = 0; p < count; ++p) {
         Portal portal = PORTAL(p);
