@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scenes import render_scene
 from test_parity import render
 from test_parity_aberrations import grazing_and_touching, mixed_overlap
 from test_parity_portals import portal_in_aberrations
@@ -24,7 +25,6 @@ from engine.box_clearance import box_clearances, camera_clearance, instance_boun
 from engine.camera_view import scene_camera
 from engine.packing import ScenePacker
 from engine.scene import Scene
-from tests.scenes import render_scene
 
 FAST = [
     pytest.param("glsl", "f32", id="glsl-f32"),

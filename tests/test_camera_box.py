@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import pytest
+from scenes import render_scene
 from test_hard_aberrations import ON_A_BOX, aimed_boxes
 from test_parity_aberrations import (
     camera_in_bending,
@@ -28,7 +29,6 @@ from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 from engine.packing import ScenePacker
 from engine.scene import Scene
-from tests.scenes import render_scene
 
 FAST = [
     pytest.param("glsl", "f32", id="glsl-f32"),

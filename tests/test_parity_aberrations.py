@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from scenes import EVERY, F32_DEPTH_MEDIAN_MAX, F64_DEPTH_P99_MAX, MISMATCH_MAX
+from scenes import SPACE_PARITY as FAST
 from test_parity import FAR, assert_clean, compare, render, translated
 
 from backends.base import AOVS, Frame
@@ -24,19 +26,7 @@ from backends.reference.backend import ReferenceBackend
 from engine.scene import Scene
 from engine.settings import Settings
 
-#: (backend, precision) pairs measured against the reference.
-FAST = [
-    pytest.param("glsl", "f32", id="glsl-f32"),
-    pytest.param("opencl", "f32", id="opencl-f32"),
-    pytest.param("opencl", "f64", id="opencl-f64"),
-]
-#: Every backend, for the closed forms.
-EVERY = [pytest.param("reference", "f64", id="reference"), *FAST, pytest.param("glsl", "f64", id="glsl-f64")]
-
-MISMATCH_MAX = 2e-3
-#: Relative depth error where both hit the same instance: median (f32) and 99th percentile (f64).
-F32_DEPTH_MEDIAN_MAX = 1e-5
-F64_DEPTH_P99_MAX = 1e-9
+#: The frame size of every case.
 SIZE = (112, 84)
 
 

@@ -16,6 +16,8 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from scenes import EVERY, F32_DEPTH_MEDIAN_MAX, F64_DEPTH_P99_MAX, MISMATCH_MAX
+from scenes import SPACE_PARITY as FAST
 from test_parity import FAR, assert_clean, compare, render, translated
 
 from backends.base import AOVS, Frame
@@ -24,16 +26,6 @@ from backends.reference.shading import to_uint8
 from engine.scene import Scene
 from engine.settings import Settings
 
-FAST = [
-    pytest.param("glsl", "f32", id="glsl-f32"),
-    pytest.param("opencl", "f32", id="opencl-f32"),
-    pytest.param("opencl", "f64", id="opencl-f64"),
-]
-EVERY = [pytest.param("reference", "f64", id="reference"), *FAST, pytest.param("glsl", "f64", id="glsl-f64")]
-
-MISMATCH_MAX = 2e-3
-F32_DEPTH_MEDIAN_MAX = 1e-5
-F64_DEPTH_P99_MAX = 1e-9
 SIZE = (112, 84)
 B = (100.0, 0.0, 0.0)
 D = (200.0, 0.0, 0.0)
