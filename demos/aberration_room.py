@@ -20,9 +20,9 @@ along world axes too, so strafing across the left half is twice as fast.
 
 from __future__ import annotations
 
-from demos._kit import CHALK, CHARCOAL, CORAL, GOLD, SAND, SLATE, TEAL, block, use_blocks
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from demos.kit import CHALK, CHARCOAL, CORAL, GOLD, SAND, SLATE, TEAL, block, use_blocks
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

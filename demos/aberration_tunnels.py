@@ -21,9 +21,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from demos._kit import BLOCK, BLUE, CHALK, GOLD, GREEN, IVORY, PURPLE, RED, SAND, SLATE, Color, block, use_blocks
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from demos.kit import BLOCK, BLUE, CHALK, GOLD, GREEN, IVORY, PURPLE, RED, SAND, SLATE, Color, block, use_blocks
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

@@ -16,9 +16,9 @@ of its speed and, having crossed the hall, looks back at the little door.
 
 from __future__ import annotations
 
-from demos._kit import CLAY, CORAL, GOLD, IVORY, LAWN, NAVY, SAND, SKY, TEAL, Color, Door, Vec3, block, room, use_blocks
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from demos.kit import CLAY, CORAL, GOLD, IVORY, LAWN, NAVY, SAND, SKY, TEAL, Color, Door, Vec3, block, room, use_blocks
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

@@ -12,9 +12,9 @@ like: the flythrough walks three stretches and never reaches the light.
 
 from __future__ import annotations
 
-from demos._kit import CHALK, CLAY, GOLD, IVORY, NAVY, RED, SAND, TEAL, block, use_blocks
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from demos.kit import CHALK, CLAY, GOLD, IVORY, NAVY, RED, SAND, TEAL, block, use_blocks
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

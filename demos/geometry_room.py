@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from demos._kit import (
+from demos.kit import (
     BLOCK,
     CLAY,
     CORAL,
@@ -31,9 +31,9 @@ from demos._kit import (
     room,
     use_blocks,
 )
-from demos._route import Stop, with_scene
+from systems.route import Stop, with_scene
 from demos.starter import KNOT_PATH
-from engine.camera_path import CameraPath
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

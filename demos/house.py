@@ -14,7 +14,7 @@ seen through a portal.
 
 from __future__ import annotations
 
-from demos._kit import (
+from demos.kit import (
     BLUE,
     CHALK,
     CLAY,
@@ -38,8 +38,8 @@ from demos._kit import (
     room,
     use_blocks,
 )
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

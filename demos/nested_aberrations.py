@@ -18,9 +18,9 @@ normal pace in magenta.
 
 from __future__ import annotations
 
-from demos._kit import CHALK, GOLD, IVORY, NAVY, ROSE, SAND, SKY, SLATE, block, use_blocks
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from demos.kit import CHALK, GOLD, IVORY, NAVY, ROSE, SAND, SKY, SLATE, block, use_blocks
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

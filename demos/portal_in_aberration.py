@@ -19,7 +19,7 @@ portal events. The flythrough walks straight through both frames.
 
 from __future__ import annotations
 
-from demos._kit import (
+from demos.kit import (
     CHALK,
     CLAY,
     CORAL,
@@ -38,8 +38,8 @@ from demos._kit import (
     room,
     use_blocks,
 )
-from demos._route import Stop, with_scene
-from engine.camera_path import CameraPath
+from systems.route import Stop, with_scene
+from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
 

@@ -3,7 +3,7 @@
  * Every record is built from 4-component vectors only, the subset on which
  * std430 and OpenCL C agree: a record's size is a multiple of its widest
  * vector (16 bytes, or 32 with REAL_IS_DOUBLE), with no hidden padding.
- * tests/test_glsl.py checks these sizes against the NumPy dtypes.
+ * tests/backends/test_glsl.py checks these sizes against the NumPy dtypes.
  *
  * Types (from the prelude): float4 / int4 are always 32-bit; real4 is float4
  * or, with REAL_IS_DOUBLE, a 4-vector of doubles. STRUCT_BEGIN/STRUCT_END

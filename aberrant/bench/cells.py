@@ -1,0 +1,250 @@
+"""One cell of the bench: one setting of one backend on one scene, measured and compared with the reference.
+
+A cell never raises for a backend's sake: a backend that cannot trace the
+scene (``BackendUnavailable``, e.g. aberrations not yet in its kernels) gives
+``unsupported: <reason>``, anything else ``error: <what>``, and the run goes
+on. The scene is shared by every cell of it and comes back exactly as it was
+(``max_events`` and the moved entity are restored).
+"""
+
+from __future__ import annotations
+
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from backends.base import AOVS, Backend, backend_class, probe
+from components import Mesh, Transform
+from aberrant.bench.metrics import Timing, compare
+from aberrant.bench.reference import ReferenceCache
+from aberrant.bench.sweeps import Setting
+from engine.bvh import BvhParams, build_bvh
+from engine.camera_view import CameraView, scene_camera
+from engine.errors import BackendUnavailable
+from engine.packed import PackedScene, TableUpdate
+from engine.packing import ScenePacker
+from engine.scene import Scene
+
+#: What the timed frames read back: the colour image, as the app and the CLI do.
+TIMED_AOVS: tuple[str, ...] = ("color",)
+
+
+def _ms(start: float) -> float:
+    return (time.perf_counter() - start) * 1e3
+
+
+def describe_updates(packed: PackedScene, updates: list[TableUpdate]) -> list[str]:
+    """``["instances[3:4] 96 B"]``: which rows of which tables an upload sends."""
+    out = []
+    for u in updates:
+        rows = "all" if u.rows is None else f"{u.rows.start}:{u.rows.stop}"
+        out.append(f"{u.table}[{rows}] {packed.update_bytes([u])} B")
+    return out
+
+
+class CellRunner:
+    """Measures cells; remembers per run what is costly to learn twice (probes, BVH build times)."""
+
+    def __init__(self, references: ReferenceCache, repeat: int) -> None:
+        self.references = references
+        self.repeat = repeat
+        self._probes: dict[str, str | None] = {}
+        self._bvh_ms: dict[tuple[str, int], float] = {}
+
+    def probe(self, backend: str) -> str | None:
+        if backend not in self._probes:
+            self._probes[backend] = probe(backend)
+        return self._probes[backend]
+
+    def bvh_build_ms(self, scene: Scene, leaf: int) -> float:
+        """Uncached build time of every distinct asset's BVH at this leaf size (memoised per run)."""
+        total = 0.0
+        seen: set[str] = set()
+        for _, mesh in scene.query(Mesh):
+            asset = scene.asset(mesh.asset)
+            if asset.content_hash in seen:
+                continue
+            seen.add(asset.content_hash)
+            key = (asset.content_hash, leaf)
+            if key not in self._bvh_ms:
+                start = time.perf_counter()
+                build_bvh(asset.vertices, asset.faces, BvhParams(max_leaf_size=leaf))
+                self._bvh_ms[key] = _ms(start)
+            total += self._bvh_ms[key]
+        return total
+
+    def run(
+        self,
+        scene: Scene,
+        camera: CameraView,
+        setting: Setting,
+        size: tuple[int, int],
+        pair: Callable[[], object] | None = None,
+        baseline: Scene | None = None,
+    ) -> dict[str, Any]:
+        """Measure one cell; the row's ``status`` is ``ok``, ``unsupported: ...`` or ``error: ...``.
+
+        ``pair``: one Embree trace of the same rays; ``baseline``: the plain scene this one deforms.
+        Either is timed alternately with extra frames, so the ratio sees the same background load
+        (the machine is shared).
+        """
+        row: dict[str, Any] = {
+            "setting": setting.as_dict(),
+            "label": setting.label,
+            "family": setting.family,
+            "backend": setting.backend,
+            "precision": setting.precision,
+            "size": list(size),
+        }
+        original = scene.settings
+        if setting.max_events is not None:
+            scene.settings = replace(original, max_events=setting.max_events)
+        row["max_events"] = scene.settings.max_events
+        try:
+            reason = self.probe(setting.backend)
+            if reason is not None:
+                raise BackendUnavailable(reason)
+            self._measure(scene, camera, setting, size, row, pair, baseline)
+            row["status"] = "ok"
+        except BackendUnavailable as e:
+            row["status"] = f"unsupported: {' '.join(str(e).split())}"
+        except Exception as e:  # recorded, never fatal: one broken cell must not lose the run
+            row["status"] = f"error: {type(e).__name__}: {' '.join(str(e).split())}"
+            row["traceback"] = traceback.format_exc(limit=6)
+        finally:
+            scene.settings = original
+        return row
+
+    def _measure(
+        self,
+        scene: Scene,
+        camera: CameraView,
+        setting: Setting,
+        size: tuple[int, int],
+        row: dict,
+        pair: Callable[[], object] | None,
+        baseline: Scene | None,
+    ) -> None:
+        width, height = size
+        row["bvh_build_ms"] = self.bvh_build_ms(scene, setting.leaf)
+        start = time.perf_counter()
+        backend: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
+        row["init_ms"] = _ms(start)
+        try:
+            packer = ScenePacker(
+                precision=backend.precision,
+                camera_relative=backend.camera_relative,
+                bvh_params=BvhParams(max_leaf_size=setting.leaf),
+                bvh_width=backend.bvh_width,
+                bvh_compact=backend.bvh_compact,
+            )
+            start = time.perf_counter()
+            updates = packer.sync(scene, camera.position)
+            row["pack_ms"] = _ms(start)
+            packed = packer.packed
+            assert packed is not None
+            start = time.perf_counter()
+            row["upload_bytes"] = int(backend.upload(packed, updates))
+            row["upload_ms"] = _ms(start)
+            start = time.perf_counter()
+            frame = backend.render(camera, width, height, AOVS)  # compiles the variant: reported apart
+            row["first_frame_ms"] = _ms(start)
+            reference = self.references.get(scene, camera, size)
+            row["reference_ms"] = reference.render_ms
+            row["reference_cached"] = reference.cached
+            errors = compare(frame.aov("instance"), frame.aov("depth"), frame.aov("perceived"), reference.aovs)
+            row["errors"] = errors.as_dict()
+            row["coverage"] = float((reference.aovs["instance"] >= 0).mean())
+            reference_backend = setting.backend == "reference"
+            if not reference_backend:  # the timed variant (colour only) compiles here, not in a timed frame
+                backend.render(camera, width, height, TIMED_AOVS)
+            samples = []
+            for _ in range(1 if reference_backend else self.repeat):
+                start = time.perf_counter()
+                backend.render(camera, width, height, TIMED_AOVS)
+                samples.append(_ms(start))
+            timing = Timing.of(samples)
+            row["frame"] = timing.as_dict()
+            row["mrays_per_s"] = timing.mrays_per_s(width * height)
+
+            def frame() -> object:
+                return backend.render(camera, width, height, TIMED_AOVS)
+
+            if pair is not None:
+                row["embree_paired"] = self._paired(pair, frame)
+            if baseline is not None:
+                row["baseline_paired"] = self._baseline(setting, baseline, size, frame)
+            self._ticks(scene, camera, packer, backend, row)
+        finally:
+            backend.release()
+
+    def _paired(self, other: Callable[[], object], frame: Callable[[], object]) -> dict[str, float]:
+        """``other``'s time over the frame's (``ratio``) and its inverse: medians of per-pair ratios."""
+        other_ms, frame_ms = [], []
+        for _ in range(self.repeat):
+            start = time.perf_counter()
+            other()
+            other_ms.append(_ms(start))
+            start = time.perf_counter()
+            frame()
+            frame_ms.append(_ms(start))
+        pairs = list(zip(other_ms, frame_ms, strict=True))
+        return {
+            "ratio": float(np.median([o / f for o, f in pairs])),
+            "inverse": float(np.median([f / o for o, f in pairs])),
+            "other_ms": float(np.median(other_ms)),
+            "frame_ms": float(np.median(frame_ms)),
+            "pairs": len(pairs),
+        }
+
+    def _baseline(
+        self, setting: Setting, baseline: Scene, size: tuple[int, int], frame: Callable[[], object]
+    ) -> dict[str, float]:
+        """The plain scene on a second backend of the same setting, its frames alternating with this scene's."""
+        other: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
+        try:
+            camera = scene_camera(baseline)
+            params = BvhParams(max_leaf_size=setting.leaf)
+            packer = ScenePacker(
+                precision=other.precision,
+                camera_relative=other.camera_relative,
+                bvh_params=params,
+                bvh_width=other.bvh_width,
+                bvh_compact=other.bvh_compact,
+            )
+            updates = packer.sync(baseline, camera.position)
+            assert packer.packed is not None
+            other.upload(packer.packed, updates)
+
+            def plain() -> object:
+                return other.render(camera, size[0], size[1], TIMED_AOVS)
+
+            plain()  # compiles its variant
+            return self._paired(plain, frame)
+        finally:
+            other.release()
+
+    @staticmethod
+    def _ticks(scene: Scene, camera: CameraView, packer: ScenePacker, backend: Backend, row: dict) -> None:
+        """Bytes a static tick and a one-entity-moved tick upload (the static one should be 0)."""
+        static = packer.sync(scene, camera.position)
+        assert packer.packed is not None
+        row["tick_static_bytes"] = int(backend.upload(packer.packed, static)) if static else 0
+        meshes = scene.query(Transform, Mesh)
+        if not meshes:
+            row["tick_moved_bytes"] = None
+            return
+        entity, (transform, _) = meshes[0]
+        moved = replace(transform, position=(transform.position[0] + 0.01, *transform.position[1:]))
+        scene.set(entity, moved)
+        try:
+            updates = packer.sync(scene, camera.position)
+            assert packer.packed is not None
+            row["tick_moved_bytes"] = int(backend.upload(packer.packed, updates)) if updates else 0
+            row["tick_moved_updates"] = describe_updates(packer.packed, updates)
+        finally:
+            scene.set(entity, transform)

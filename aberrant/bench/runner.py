@@ -1,0 +1,344 @@
+"""``aberrant bench``: every chosen backend and setting on every chosen scene, then the report, all at once.
+
+The run measures (cells, Embree, engine overhead), then renders
+``report.md``, ``results.json`` and ``speed_vs_error.png`` in memory and
+writes the three through temporary files and renames: an interrupted or
+failed run never leaves a half-written report beside an old plot.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+from backends.base import BACKENDS, backend_class
+from engine.atomic_files import write_atomically
+from aberrant.bench import embree
+from aberrant.bench.cells import CellRunner
+from aberrant.bench.facts import machine_info, scene_info
+from aberrant.bench.metrics import compare
+from aberrant.bench.overhead import measure_overhead
+from aberrant.bench.plot import plot_png
+from aberrant.bench.reference import ReferenceCache
+from aberrant.bench.report import render_report
+from aberrant.bench.scenes import SceneSpec, resolve_scenes
+from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from engine.camera_view import scene_camera
+from engine.errors import AberrantError, BackendUnavailable
+from aberrant.progress import Progress, clock
+from engine.scene import Scene
+
+FORMAT = "aberrant-bench"
+VERSION = 1
+DEFAULT_BACKENDS: tuple[str, ...] = ("glsl", "opencl")
+FULL_SIZE, QUICK_SIZE = (800, 800), (96, 72)
+FULL_REPEAT, QUICK_REPEAT = 5, 3
+OUTPUTS: tuple[str, ...] = ("report.md", "results.json", "speed_vs_error.png")
+
+
+@dataclass
+class BenchConfig:
+    """A validated run: what to measure and where the report goes."""
+
+    scenes: list[SceneSpec]
+    backends: list[str]
+    size: tuple[int, int]
+    repeat: int
+    out: Path
+    quick: bool = False
+    sweeps: list[str] = field(default_factory=list)
+    overhead: bool = True
+    embree: bool = True
+    command: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "scenes": [s.name for s in self.scenes],
+            "backends": self.backends,
+            "size": list(self.size),
+            "repeat": self.repeat,
+            "quick": self.quick,
+            "sweeps": self.sweeps,
+            "command": self.command,
+        }
+
+
+def _names(values: list[str] | None) -> list[str]:
+    """``["a,b", "c"]`` -> ``["a", "b", "c"]``: lists may be given with commas or spaces."""
+    return [n.strip() for v in values or [] for n in v.split(",") if n.strip()]
+
+
+def make_config(
+    *,
+    scenes: list[str] | None = None,
+    backends: list[str] | None = None,
+    size: tuple[int, int] | None = None,
+    repeat: int | None = None,
+    out: str | Path = "out/bench",
+    quick: bool = False,
+    sweeps: list[str] | None = None,
+    overhead: bool = True,
+    command: str = "",
+) -> BenchConfig:
+    """Check every argument before anything runs; a bad one is an :class:`AberrantError` naming the choices."""
+    specs = resolve_scenes(_names(scenes), quick)
+    chosen = _names(backends) or list(DEFAULT_BACKENDS)
+    for name in chosen:
+        if name not in BACKENDS:
+            raise AberrantError(f"unknown backend {name!r}; choose from {', '.join(BACKENDS)}")
+    repeat = (QUICK_REPEAT if quick else FULL_REPEAT) if repeat is None else repeat
+    if not 1 <= repeat <= 1000:
+        raise AberrantError(f"--repeat must lie in [1, 1000], got {repeat}")
+    sweep_names = check_sweeps(_names(sweeps)) if sweeps else list(QUICK_SWEEPS if quick else check_sweeps(["all"]))
+    out_dir = Path(out)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise AberrantError(f"--out {out_dir}: exists and is not a directory")
+    return BenchConfig(
+        specs,
+        list(dict.fromkeys(chosen)),
+        size or (QUICK_SIZE if quick else FULL_SIZE),
+        repeat,
+        out_dir,
+        quick,
+        sweep_names,
+        overhead,
+        True,
+        command,
+    )
+
+
+def asset_dir() -> Path:
+    """Where generated bench meshes live (beside the BVH and reference caches)."""
+    env = os.environ.get("ABERRANT_CACHE_DIR")
+    return (Path(env) if env else Path.home() / ".cache" / "aberrant") / "bench-assets"
+
+
+# --- the run ---------------------------------------------------------------------------------------------
+
+
+def _plan(config: BenchConfig) -> list[Setting]:
+    out: list[Setting] = []
+    for name in config.backends:
+        precisions = list(backend_class(name).precisions)
+        out += settings_for(name, precisions, config.sweeps, config.quick)
+    return out
+
+
+def _cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
+    """A fixed-size scene skips the size sweep: only its own size tests what it is for."""
+    return [s for s in settings if not (spec.size and s.sweep == "size")]
+
+
+def _embree_rows(
+    anchor: embree.EmbreeAnchor, refs: ReferenceCache, scene: Scene, sizes: list[tuple[int, int]]
+) -> dict[str, Any]:
+    """Embree at every size the scene's cells use; each size's errors against the reference too."""
+    camera = scene_camera(scene)
+    out: dict[str, Any] = {}
+    try:
+        anchor.load(scene, camera)
+    except Exception as e:  # the anchor is a comparison, never a reason to lose the run
+        why = f"error: {type(e).__name__}: {' '.join(str(e).split())}"
+        return {f"{w}x{h}": {"status": why} for w, h in sizes}
+    for size in sizes:
+        key = f"{size[0]}x{size[1]}"
+        try:
+            run = anchor.run(size)
+            best = run.modes[run.best]
+            rays = size[0] * size[1]
+            assert run.instance is not None and run.depth is not None
+            errors = compare(run.instance, run.depth, None, refs.get(scene, camera, size).aovs)
+            modes = {m: {**v, "mrays_per_s": embree.mrays(v["median_ms"], rays)} for m, v in run.modes.items()}
+            out[key] = {"status": "ok", "build_ms": run.build_ms, "best": run.best, "frame": best,
+                        "mrays_per_s": embree.mrays(best["median_ms"], rays), "modes": modes,
+                        "errors": errors.as_dict()}  # fmt: skip
+        except Exception as e:  # as above
+            out[key] = {"status": f"error: {type(e).__name__}: {' '.join(str(e).split())}"}
+    return out
+
+
+def _pair(
+    anchor: embree.EmbreeAnchor | None, scene_anchor: dict[str, Any], setting: Setting, size: tuple[int, int]
+) -> Callable[[], object] | None:
+    """Embree's best tracer at ``size`` to interleave with a base setting's frames, or ``None``."""
+    if anchor is None or scene_anchor.get("status") != "ok" or not setting.is_base or setting.backend == "reference":
+        return None
+    entry = scene_anchor["sizes"].get(f"{size[0]}x{size[1]}", {})
+    return anchor.tracer(size, entry["best"]) if entry.get("status") == "ok" else None
+
+
+def _measure_scene(
+    spec: SceneSpec,
+    config: BenchConfig,
+    settings: list[Setting],
+    cells: CellRunner,
+    anchor: embree.EmbreeAnchor | None,
+    embree_reason: str | None,
+    progress: Progress,
+) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
+    """Embree (on a Euclidean scene), then every cell; a scene that fails to build gives error cells."""
+    todo = _cells(spec, settings)
+    scene: Scene | None = None
+    try:
+        scene = spec.build(asset_dir())
+        info = scene_info(spec, scene)
+        camera = scene_camera(scene)
+    except Exception as e:  # a broken level must not lose the other scenes' measurements
+        if scene is not None:
+            scene.close()
+        why = f"error: the scene failed to build: {type(e).__name__}: {' '.join(str(e).split())}"
+        info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
+                "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
+                "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
+        rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
+                 "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
+                 "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
+        progress.step(spec.name, len(todo))
+        return info, {"status": why}, rows
+    rows = []
+    baseline = None
+    try:
+        baseline = spec.baseline(asset_dir()) if spec.baseline is not None else None
+        sizes = sorted({spec.size or s.size_for(config.size) for s in todo})
+        if not info["euclidean"]:
+            scene_anchor: dict[str, Any] = {"status": "not applicable: the scene is not Euclidean"}
+        elif anchor is None:
+            scene_anchor = {"status": embree_reason}
+        else:
+            progress.show(f"{spec.name}: embree")
+            scene_anchor = {"status": "ok", "sizes": _embree_rows(anchor, cells.references, scene, sizes)}
+        for setting in todo:
+            progress.show(f"{spec.name}: {setting.label}")
+            size = spec.size or setting.size_for(config.size)
+            plain = baseline if setting.is_base and setting.backend != "reference" else None
+            row = cells.run(scene, camera, setting, size, _pair(anchor, scene_anchor, setting, size), plain)
+            row["scene"] = spec.name
+            _ratio(row, scene_anchor)
+            rows.append(row)
+            progress.step(f"{spec.name}: {setting.label}")
+    finally:
+        scene.close()
+        if baseline is not None:
+            baseline.close()
+    return info, scene_anchor, rows
+
+
+def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, Any]:
+    """Measure everything the config asks for; returns the results document (also what results.json holds)."""
+    stream = stream if stream is not None else sys.stderr
+    started = time.time()
+    load_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    settings = _plan(config)
+    refs = ReferenceCache()
+    cells = CellRunner(refs, config.repeat)
+    probes = {name: cells.probe(name) for name in config.backends}
+    machine = machine_info(config.backends, probes)
+    embree_reason = embree.available() if config.embree else "embree: disabled"
+    anchor = embree.EmbreeAnchor(config.repeat) if embree_reason is None else None
+    total = sum(len(_cells(spec, settings)) for spec in config.scenes)
+    progress = Progress(total, stream)
+    progress.note(f"aberrant bench: {len(config.scenes)} scenes x {len(settings)} settings = {total} cells")
+    rows: list[dict[str, Any]] = []
+    scenes: dict[str, Any] = {}
+    anchors: dict[str, Any] = {}
+    try:
+        for spec in config.scenes:
+            info, scene_anchor, scene_rows = _measure_scene(
+                spec, config, settings, cells, anchor, embree_reason, progress
+            )
+            scenes[spec.name], anchors[spec.name] = info, scene_anchor
+            rows += scene_rows
+        overhead = []
+        if config.overhead:
+            for name in config.backends:
+                progress.show(f"engine overhead: {name}")
+                try:
+                    overhead.append(measure_overhead(name, "f32" if "f32" in backend_class(name).precisions else None))
+                except BackendUnavailable as e:  # the report says why
+                    overhead.append({"backend": name, "status": f"unsupported: {' '.join(str(e).split())}"})
+                except Exception as e:  # recorded, never fatal
+                    overhead.append({"backend": name, "status": f"error: {type(e).__name__}: {e}"})
+    finally:
+        progress.finish()
+        if anchor is not None:
+            anchor.close()
+    machine["load_average"] = {"start": load_start, "end": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "started": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(started)),
+        "duration_s": time.time() - started,
+        "config": config.as_dict(),
+        "machine": machine,
+        "settings": [s.as_dict() for s in settings],
+        "scenes": scenes,
+        "embree": anchors,
+        "rows": rows,
+        "overhead": overhead,
+        "reference_cache": {"folder": str(refs.folder), "hits": refs.hits, "misses": refs.misses},
+    }
+
+
+def _ratio(row: dict[str, Any], anchor: dict[str, Any]) -> None:
+    """The row's rays/s as a multiple of Embree's on the same scene and size (or why there is none)."""
+    if anchor.get("status") != "ok":
+        row["embree_ratio"], row["embree_note"] = None, anchor.get("status")
+        return
+    entry = anchor["sizes"].get(f"{row['size'][0]}x{row['size'][1]}", {})
+    if row.get("status") != "ok" or entry.get("status") != "ok":
+        row["embree_ratio"], row["embree_note"] = None, entry.get("status", "no embree run at this size")
+        return
+    row["embree_ratio"] = row["mrays_per_s"] / entry["mrays_per_s"]
+    row["embree_note"] = ""
+
+
+def _clean(value: Any) -> Any:
+    """Strict JSON: NaN and infinities become null."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_clean(v) for v in value]
+    return value
+
+
+def write_outputs(results: dict[str, Any], out: Path) -> list[Path]:
+    """Render the report and the plot, then write all three files atomically."""
+    out.mkdir(parents=True, exist_ok=True)
+    png, plot_note = plot_png(results)
+    results["plot_note"] = plot_note
+    text = render_report(results)
+    data = json.dumps(_clean(results), indent=1, allow_nan=False).encode()
+    paths = [out / name for name in OUTPUTS]
+    write_atomically(dict(zip(paths, (text.encode(), data, png), strict=True)))
+    return paths
+
+
+def rerender(results_path: Path, out: Path) -> list[Path]:
+    """Write the report and plot again from an earlier run's results.json (no measuring)."""
+    try:
+        results = json.loads(Path(results_path).read_text())
+    except (OSError, ValueError) as e:
+        raise AberrantError(f"--from-results {results_path}: cannot read it ({e})") from None
+    if not isinstance(results, dict) or results.get("format") != FORMAT:
+        raise AberrantError(f"--from-results {results_path}: not an aberrant bench results.json")
+    results.pop("plot_note", None)
+    return write_outputs(results, out)
+
+
+def bench_command(config: BenchConfig, stream: TextIO | None = None) -> int:
+    """Run, write, and say where the report is; returns the exit status."""
+    results = run_bench(config, stream)
+    paths = write_outputs(results, config.out)
+    for path in paths:
+        print(f"wrote {path}")
+    print(f"bench: {len(results['rows'])} cells in {clock(results['duration_s'])}")
+    return 0

@@ -1,0 +1,426 @@
+"""The ``aberrant`` command line: render a scene or demo (a frame or a flythrough), import
+TelloEngine scenes, list backends, list demos.
+
+Every error a user can cause (a bad scene file, an unknown backend or demo, a
+bad size, an output folder that does not exist) is one line on stderr,
+``aberrant: error: ...``, and exit status 2, with no traceback. Outputs are
+written only after the render succeeded, each through a temporary file and a
+rename, so a failed run never leaves a new or half-written file behind and
+never overwrites an old one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import os
+import re
+import sys
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn, TypeVar
+
+import numpy as np
+
+from engine.errors import AberrantError
+
+if TYPE_CHECKING:
+    from backends.base import Backend, Frame
+    from engine.scene import Scene
+
+PROG = "aberrant"
+#: The largest image side ``render`` accepts (guards against typos like 80000x600).
+MAX_SIDE = 16384
+#: The backend a render falls back to when the chosen one fails while rendering (it traces everything).
+FALLBACK_BACKEND = "reference"
+#: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
+NPZ_AOVS = ("depth", "perceived", "instance", "events")
+
+
+T = TypeVar("T")
+
+
+class UsageError(AberrantError):
+    """A command-line argument is wrong."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but usage errors are one line like every other error (still exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"640x480"`` -> ``(640, 480)``; both sides in [1, MAX_SIDE]."""
+    match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", text)
+    if not match:
+        raise UsageError(f"--size must be WIDTHxHEIGHT in pixels, e.g. 640x480; got {text!r}")
+    width, height = int(match.group(1)), int(match.group(2))
+    for side, value in (("width", width), ("height", height)):
+        if not 1 <= value <= MAX_SIDE:
+            raise UsageError(f"--size {side} must lie in [1, {MAX_SIDE}] pixels; got {text!r}")
+    return width, height
+
+
+def _check_output(option: str, path: Path) -> None:
+    """Fail before rendering when ``path`` cannot be written (so no render time is wasted)."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"{option} {path}: the directory {str(parent)!r} does not exist")
+    if path.is_dir():
+        raise UsageError(f"{option} {path}: is a directory")
+    if not os.access(parent, os.W_OK):
+        raise UsageError(f"{option} {path}: the directory {str(parent)!r} is not writable")
+
+
+def _load(source: str) -> Scene:
+    """A scene from a scene file path or a demo name."""
+    from demos import DEMOS, build_demo
+    from engine.scene_file import load_scene
+
+    path = Path(source)
+    if path.suffix.lower() == ".json" or path.is_file():
+        return load_scene(path)
+    if source in DEMOS:
+        return build_demo(source)
+    raise UsageError(f"{source!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
+
+
+def _png_bytes(color: np.ndarray) -> bytes:
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(color), mode="RGBA" if color.shape[2] == 4 else "RGB").save(buffer, "PNG")
+    return buffer.getvalue()
+
+
+def _npz_bytes(frame: Frame) -> bytes:
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **{name: frame.aov(name) for name in NPZ_AOVS})
+    return buffer.getvalue()
+
+
+def _brief(message: str, errors: int = 2) -> str:
+    """A backend failure in one line: its first line plus the first ``errors`` lines that say "error"
+    (a compiler log can run to hundreds of lines; the first errors are the ones to read)."""
+    lines = [line.strip() for line in message.splitlines() if line.strip()]
+    if not lines:
+        return ""
+    found = [line for line in lines[1:] if "error" in line.lower()][:errors]
+    return _one_line(" | ".join([lines[0], *found]))
+
+
+def _raised_by_backend(error: BaseException, backend: Backend) -> bool:
+    """Whether ``error`` is the backend's own failure (raised in its package), not the scene's or the caller's."""
+    from engine.errors import BackendUnavailable
+
+    if isinstance(error, BackendUnavailable):
+        return True
+    package = type(backend).__module__.rpartition(".")[0] or type(backend).__module__
+    tb = error.__traceback__
+    while tb is not None:
+        module = str(tb.tb_frame.f_globals.get("__name__", ""))
+        if module == package or module.startswith(f"{package}."):
+            return True
+        tb = tb.tb_next
+    return False
+
+
+def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> tuple[T, str]:
+    """``render(backend)`` on the chosen backend, falling back to the reference when it fails while rendering.
+
+    Choosing a backend already falls back when one cannot start (it says why);
+    a fast backend can still fail on its first frame, when its kernel is
+    built: a driver that cannot compile it, a scene feature it does not
+    trace. The scene itself is fine (it loaded), so the reference, which
+    traces everything, renders it instead, after a one-line message saying
+    which backend failed and the compiler's first errors.
+    """
+    from backends.base import create_backend
+
+    backend = create_backend(args.backend, precision=args.precision, fallback=True)
+    try:
+        return render(backend), backend.name
+    except AberrantError as e:
+        if backend.name == FALLBACK_BACKEND or not _raised_by_backend(e, backend):
+            raise
+        failure = _brief(str(e))
+    finally:
+        backend.release()
+    print(
+        f"{PROG}: the {backend.name} backend failed ({failure}); falling back to the {FALLBACK_BACKEND} backend",
+        file=sys.stderr,
+    )
+    reference = create_backend(FALLBACK_BACKEND, fallback=False)
+    try:
+        return render(reference), reference.name
+    finally:
+        reference.release()
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from backends.base import AOVS
+    from systems.app import render_once
+    from engine.atomic_files import write_atomically
+
+    if args.path:
+        return cmd_render_path(args)
+    if args.frames is not None or args.fps is not None:
+        raise UsageError("--frames and --fps render a flythrough; add --path")
+    width, height = parse_size(args.size)
+    out = Path(args.out or "frame.png")
+    _check_output("--out", out)
+    npz = Path(args.aovs) if args.aovs else None
+    if npz is not None:
+        _check_output("--aovs", npz)
+        if os.path.abspath(npz) == os.path.abspath(out):
+            raise UsageError("--out and --aovs name the same file")
+    scene = _load(args.scene)
+    aovs = AOVS if npz is not None else ("color",)
+
+    def render(backend: Backend) -> tuple[Frame, float]:
+        start = time.perf_counter()
+        frame = render_once(scene, backend, (width, height), aovs)
+        return frame, (time.perf_counter() - start) * 1e3
+
+    try:
+        (frame, elapsed_ms), backend_name = _with_fallback(args, render)
+    finally:
+        scene.close()
+    outputs = {out: _png_bytes(frame.aov("color"))}
+    if npz is not None:
+        outputs[npz] = _npz_bytes(frame)
+    write_atomically(outputs)
+    for path in outputs:
+        print(f"wrote {path}")
+    render_ms = frame.timings_ms.get("render")
+    detail = f" (render {render_ms:.1f} ms)" if render_ms is not None else ""
+    print(f"{width}x{height} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
+    return 0
+
+
+def cmd_render_path(args: argparse.Namespace) -> int:
+    """``render --path``: a flythrough walked by the real systems (aberrant/flythrough.py)."""
+    from aberrant.flythrough import check_output, path_for, render_flythrough
+
+    if args.aovs:
+        raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
+    width, height = parse_size(args.size)
+    frames = 48 if args.frames is None else args.frames
+    if frames < 1:
+        raise UsageError(f"--frames must be at least 1, got {frames}")
+    out = Path(args.out or "flythrough.gif")
+    check_output(out)
+    scene = _load(args.scene)
+
+    def render(backend: Backend) -> float:
+        start = time.perf_counter()
+        render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
+        return time.perf_counter() - start
+
+    try:
+        path = path_for(args.scene, scene)
+        elapsed, backend_name = _with_fallback(args, render)
+    finally:
+        scene.close()
+    print(f"wrote {out}")
+    print(f"{frames} frames of {width}x{height} with the {backend_name} backend in {elapsed:.1f} s")
+    return 0
+
+
+def cmd_import_tello(args: argparse.Namespace) -> int:
+    """``import-tello``: a TelloEngine scene file to our scene format (aberrant/importers/tello.py)."""
+    from aberrant.importers.tello import import_tello
+
+    scene_file = Path(args.scene_file)
+    mesh_dir = Path(args.mesh_dir) if args.mesh_dir else Path(os.path.abspath(scene_file)).parent.parent / "Mesh"
+    out = Path(args.out)
+    _check_output("--out", out)
+    result = import_tello(scene_file, mesh_dir, out, checker=args.checker)
+    result.scene.close()
+    for warning in result.warnings:
+        print(f"{PROG}: warning: {_one_line(warning)}", file=sys.stderr)
+    for path in result.mesh_files:
+        print(f"wrote {path}")
+    counts = ", ".join(f"{n} {kind}" for kind, n in result.counts.items())
+    print(f"wrote {out} ({counts}; camera: {result.camera})")
+    return 0
+
+
+def cmd_backends(args: argparse.Namespace) -> int:
+    from backends.base import BACKENDS, backend_class, probe
+
+    for name in BACKENDS:
+        reason = probe(name)
+        if reason is not None:
+            print(f"{name}: unavailable: {reason}")
+            continue
+        try:
+            backend = backend_class(name)()
+        except Exception as e:  # probing passed yet it cannot start: report, do not crash the listing
+            print(f"{name}: unavailable: {type(e).__name__}: {e}")
+            continue
+        try:
+            info = backend.info()
+        finally:
+            backend.release()
+        print(f"{name}: available")
+        for key, value in info.items():
+            print(f"  {key}: {value}")
+    return 0
+
+
+def cmd_demos(args: argparse.Namespace) -> int:
+    from demos import demo_names, describe
+
+    names = demo_names()
+    width = max((len(n) for n in names), default=0)
+    for name in names:
+        print(f"{name:<{width}}  {describe(name)}")
+    return 0
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``bench``: speed against error for every backend and setting (aberrant/bench/)."""
+    from aberrant.bench import bench_command, make_config, rerender
+
+    if args.from_results:
+        for path in rerender(Path(args.from_results), Path(args.out)):
+            print(f"wrote {path}")
+        return 0
+    config = make_config(
+        scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
+        repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
+        command=" ".join([PROG, *(args.argv or [])]),
+    )  # fmt: skip
+    return bench_command(config)
+
+
+def cmd_editor(args: argparse.Namespace) -> int:
+    """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
+    try:
+        from editor.app import EditorUnavailable, display_problem, load_target, run_editor
+    except ImportError as e:
+        raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
+    problem = display_problem()
+    if problem is not None:
+        raise UsageError(problem)
+    model = load_target(args.scene)  # a bad file or name fails here, before a window opens
+    try:
+        return run_editor(model, backend=args.backend)
+    except EditorUnavailable as e:
+        raise UsageError(str(e)) from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description="Ray trace triangle-mesh scenes in deformed space.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
+
+    render = sub.add_parser("render", help="render one frame (or, with --path, a flythrough) of a scene or demo")
+    render.add_argument("scene", metavar="SCENE", help="a scene file (.json) or a demo name (see 'aberrant demos')")
+    render.add_argument(
+        "--backend", default=None, help="reference, glsl, opencl or auto (default: $ABERRANT_BACKEND or auto)"
+    )
+    render.add_argument("--precision", choices=("f32", "f64"), default=None, help="tracing precision")
+    render.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
+    render.add_argument(
+        "--out", default=None, help="colour image to write (default frame.png); with --path: .mp4, .gif or a folder"
+    )
+    render.add_argument(
+        "--aovs", default=None, metavar="FILE.npz", help="also write depth, perceived, instance, events"
+    )
+    render.add_argument(
+        "--path", action="store_true", help="render a flythrough: the demo's camera_path(), else a walk forward"
+    )
+    render.add_argument("--frames", type=int, default=None, help="flythrough frames (default 48)")
+    render.add_argument("--fps", type=float, default=None, help="flythrough frame rate (default: real time)")
+    render.set_defaults(func=cmd_render)
+
+    tello = sub.add_parser("import-tello", help="convert a TelloEngine (thesis engine) scene file to a scene file")
+    tello.add_argument("scene_file", metavar="SCENE_FILE", help="a TelloEngine scene file (JSON + NUL)")
+    tello.add_argument("--mesh-dir", default=None, help="its mesh resources (default: ../Mesh beside its folder)")
+    tello.add_argument("--out", required=True, help="scene file to write; meshes go to <out stem>_meshes/ beside it")
+    tello.add_argument(
+        "--checker", type=float, default=0.125, help="checker cell size in UV units, like the thesis texture (0: none)"
+    )
+    tello.set_defaults(func=cmd_import_tello)
+
+    backends = sub.add_parser("backends", help="list the tracer backends and whether they can run here")
+    backends.set_defaults(func=cmd_backends)
+
+    demos = sub.add_parser("demos", help="list the demos")
+    demos.set_defaults(func=cmd_demos)
+
+    bench = sub.add_parser("bench", help="speed against error: every backend and setting on every scene, a report")
+    bench.add_argument(
+        "--scenes",
+        nargs="+",
+        default=None,
+        metavar="SCENE",
+        help="scene names or groups (all, bench, demos, hard, overhead); default all (--quick: a few)",
+    )
+    bench.add_argument(
+        "--backends", nargs="+", default=None, metavar="BACKEND", help="glsl, opencl, reference (default: glsl opencl)"
+    )
+    bench.add_argument("--size", default=None, help="WIDTHxHEIGHT (default 800x800; --quick 96x72)")
+    bench.add_argument("--repeat", type=int, default=None, help="timed frames per cell (default 5; --quick 3)")
+    bench.add_argument("--out", default="out/bench", help="folder for report.md, results.json, speed_vs_error.png")
+    bench.add_argument("--quick", action="store_true", help="small sizes, few scenes and sweeps (under two minutes)")
+    bench.add_argument(
+        "--sweeps",
+        nargs="+",
+        default=None,
+        metavar="SWEEP",
+        help="all, none, or: precision max_events size leaf workgroup tables local_size",
+    )
+    bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
+    bench.add_argument(
+        "--from-results",
+        default=None,
+        metavar="RESULTS.json",
+        help="only re-render report and plot from a results.json",
+    )
+    bench.set_defaults(func=cmd_bench)
+
+    editor = sub.add_parser("editor", help="open the level editor (play mode included) on a scene file or demo")
+    editor.add_argument("scene", metavar="SCENE|DEMO", nargs="?", default=None, help="a scene file or demo name")
+    editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
+    editor.set_defaults(func=cmd_editor)
+    return parser
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``aberrant`` console script; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse's --help (0) and usage errors (2)
+        return int(e.code or 0) if not isinstance(e.code, str) else 2
+    args.argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        with warnings.catch_warnings():
+            # numpy's "overflow encountered in ..." from extreme (but valid) scene values says nothing a user
+            # can act on; the tracers keep NaN and inf out of the image, so keep stderr for real messages.
+            warnings.filterwarnings("ignore", message=r".* encountered in ", category=RuntimeWarning)
+            return int(args.func(args))
+    except AberrantError as e:
+        print(f"{PROG}: error: {_one_line(str(e))}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"{PROG}: error: {where}{_one_line(e.strerror or str(e))}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Importers: scenes from other engines' files, converted to aberrant scene files."""

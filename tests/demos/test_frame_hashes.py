@@ -1,0 +1,53 @@
+"""Every demo's frame on every backend variant hashes as recorded: moving code must not change a pixel.
+
+The hashes were recorded at 48x36 over all five AOVs. The reference (float64 NumPy) is compared
+everywhere; a fast backend's bits depend on its driver, so it is compared only on the device the
+hashes were recorded on and skipped, with the device named, elsewhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from backends.base import AOVS, Backend, Frame
+from conftest import require_backend
+from demos import build_demo, demo_names
+from systems.app import render_once
+
+RECORD = Path(__file__).resolve().parents[1] / "data" / "frame_hashes.json"
+SIZE = (48, 36)
+VARIANTS = (("reference", "f64"), ("glsl", "f32"), ("opencl", "f32"), ("opencl", "f64"))
+
+
+def frame_hash(frame: Frame) -> str:
+    digest = hashlib.sha256()
+    for aov in AOVS:
+        digest.update(aov.encode())
+        digest.update(np.ascontiguousarray(frame.aov(aov)).tobytes())
+    return digest.hexdigest()
+
+
+def device_of(backend: Backend) -> str:
+    info = backend.info()
+    return " / ".join(info[key] for key in ("renderer", "version", "device", "pocl") if key in info)
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), VARIANTS, ids=[f"{b}-{p}" for b, p in VARIANTS])
+@pytest.mark.parametrize("demo", demo_names())
+def test_demo_frame_is_bit_identical_to_the_record(demo: str, backend_name: str, precision: str, backend_factory) -> None:
+    record = json.loads(RECORD.read_text())
+    require_backend(backend_name)
+    backend = backend_factory(backend_name, precision if backend_name != "reference" else None)
+    if backend_name != "reference" and device_of(backend) != record["devices"][backend_name]:
+        pytest.skip(f"recorded on {record['devices'][backend_name]!r}, this is {device_of(backend)!r}")
+    scene = build_demo(demo)
+    try:
+        frame = render_once(scene, backend, size=SIZE)
+    finally:
+        scene.close()
+    assert frame_hash(frame) == record["hashes"][f"{demo}/{backend_name}-{precision}"]
