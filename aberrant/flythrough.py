@@ -37,15 +37,15 @@ from typing import TextIO
 
 import numpy as np
 
+from aberrant.progress import Progress
 from backends.base import Backend
 from components import Camera, Transform
-from systems.app import App
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.input import NoInput
 from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
-from aberrant.progress import Progress
 from engine.scene import Scene
+from systems.app import App
+from systems.camera_path import CameraPath, Keyframe
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
