@@ -1,10 +1,12 @@
-"""The README's examples run: the level-as-code snippet and the scene file example."""
+"""The README's examples run: every Python block on its own, the level-as-code scene, the scene file example."""
 
 from __future__ import annotations
 
 import re
 import shutil
 from pathlib import Path
+
+import pytest
 
 from components import Aberration, Mesh, Portal
 from engine.scene import Scene
@@ -14,12 +16,37 @@ ROOT = Path(__file__).resolve().parents[2]
 KNOT = ROOT / "demos" / "assets" / "knot.obj"
 
 
-def _block(language: str, containing: str) -> str:
+def _blocks(language: str) -> list[tuple[int, str]]:
+    """``(line, code)`` of every fenced ``language`` block of the README, ``line`` the first line of code."""
     text = (ROOT / "README.md").read_text()
-    for block in re.findall(rf"```{language}\n(.*?)```", text, flags=re.S):
+    return [
+        (text.count("\n", 0, match.start(1)) + 1, match.group(1))
+        for match in re.finditer(rf"```{language}\n(.*?)```", text, flags=re.S)
+    ]
+
+
+def _block(language: str, containing: str) -> str:
+    for _, block in _blocks(language):
         if containing in block:
             return block
     raise AssertionError(f"README has no {language} block containing {containing!r}")
+
+
+PYTHON_BLOCKS = _blocks("python")
+
+
+@pytest.mark.parametrize(("line", "code"), PYTHON_BLOCKS, ids=[f"line-{line}" for line, _ in PYTHON_BLOCKS])
+def test_python_block_runs(line: int, code: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each block alone, in a fresh namespace and an empty folder: the README promises no state between them."""
+    monkeypatch.chdir(tmp_path)
+    exec(compile("\n" * (line - 1) + code, str(ROOT / "README.md"), "exec"), {"__name__": "__readme__"})
+
+
+def test_python_api_section_sits_before_the_gallery() -> None:
+    text = (ROOT / "README.md").read_text()
+    start, end = text.index("## Python API"), text.index("## Gallery")
+    assert text.index("make test") < start < end
+    assert text[start:end].count("```python\n") >= 4  # render, a headless test, two backends, save and load
 
 
 def _statue_dir(tmp_path: Path) -> Path:
