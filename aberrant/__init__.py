@@ -160,7 +160,7 @@ size must be positive, got 0x10
 
 from __future__ import annotations
 
-from aberrant.render import render
+from aberrant.rendering import render
 from backends.base import Frame, create_backend
 from components import Aberration, Camera, Mesh, Portal, Transform
 from demos import build_demo, demo_names

@@ -94,7 +94,7 @@ def test_every_exported_name_is_importable_and_documented_with_an_example() -> N
 def test_docstring_examples_run() -> None:
     """The package's and render()'s examples are doctests: what they show is what the code does."""
     runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS)
-    for module in (aberrant, importlib.import_module("aberrant.render")):
+    for module in (aberrant, importlib.import_module("aberrant.rendering")):
         for test in doctest.DocTestFinder().find(module, module.__name__):
             runner.run(test)
     results = runner.summarize(verbose=False)
