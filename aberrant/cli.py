@@ -302,7 +302,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_editor(args: argparse.Namespace) -> int:
     """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
     try:
-        from editor.app import EditorUnavailable, display_problem, load_target, run_editor
+        from editor.window import EditorUnavailable, display_problem, load_target, run_editor
     except ImportError as e:
         raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
     problem = display_problem()

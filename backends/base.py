@@ -186,9 +186,3 @@ def create_backend(
 ) -> Backend:
     """A ready backend, chosen as :func:`resolve_name` does."""
     return backend_class(resolve_name(name, fallback=fallback, log=log))(precision=precision)
-
-
-def required_backends() -> list[str]:
-    """Backends that must run here (``ABERRANT_REQUIRE_BACKENDS``, comma-separated), for tests and CI."""
-    raw = os.environ.get("ABERRANT_REQUIRE_BACKENDS", "")
-    return [name.strip() for name in raw.split(",") if name.strip()]

@@ -17,8 +17,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backends.base import BACKENDS, Backend, Frame, backend_class, create_backend, probe
+from backends.upload import SceneUploader
 from engine.camera_view import CameraView
-from engine.packing import ScenePacker
 from engine.scene import Scene
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ HISTORY = 240
 
 
 class BackendHost:
-    """Owns the active backend and the packer that feeds it in edit mode."""
+    """Owns the active backend and the uploader that feeds it in edit mode."""
 
     def __init__(self, ctx: moderngl.Context | None = None, log: Callable[[str], None] | None = None) -> None:
         self.ctx = ctx
@@ -43,7 +43,7 @@ class BackendHost:
         self.mrays: deque[float] = deque(maxlen=HISTORY)
         self.frames = 0
         self._reasons: dict[str, str | None] | None = None
-        self._packer: ScenePacker | None = None
+        self._uploader: SceneUploader | None = None
         self._key: tuple[Any, ...] | None = None
         self._texture: moderngl.Texture | None = None
         self.last_frame: Frame | None = None
@@ -103,7 +103,7 @@ class BackendHost:
 
     def invalidate(self) -> None:
         """Forget what was uploaded (another scene ran on the backend, or the scene object changed)."""
-        self._packer = None
+        self._uploader = None
         self._key = None
 
     # --- rendering -----------------------------------------------------------------------------
@@ -117,22 +117,14 @@ class BackendHost:
             return self.error is None and self.texture is not None
         self._key = key
         try:
-            if self._packer is None:
-                self._packer = ScenePacker(
-                    self.backend.precision,
-                    self.backend.camera_relative,
-                    bvh_width=self.backend.bvh_width,
-                    bvh_compact=self.backend.bvh_compact,
-                )
-            updates = self._packer.sync(scene, view.position)
-            if updates:
-                assert self._packer.packed is not None
-                self.backend.upload(self._packer.packed, updates)
+            if self._uploader is None:
+                self._uploader = SceneUploader(self.backend)
+            self._uploader.sync(scene, view.position)
             start = time.perf_counter()
             frame = self.backend.render(view, size[0], size[1], self.aovs)
             elapsed = (time.perf_counter() - start) * 1e3
         except Exception as e:  # a backend that cannot trace this scene: say so, show the raster preview
-            self._packer = None
+            self._uploader = None
             message = f"{self.backend.name}: {e}"
             if message != self.error:
                 self.log(message)

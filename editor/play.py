@@ -89,7 +89,8 @@ class PlaySession:
         self.error: str | None = None
         self.elapsed = 0.0
         try:
-            self.app = App(self.scene, backend, size=size, aovs=aovs, input_source=self.input)
+            #: The tick loop that plays the copy (movement, teleport, upload, render).
+            self.runner = App(self.scene, backend, size=size, aovs=aovs, input_source=self.input)
         except BaseException:
             self.scene.close()
             raise
@@ -97,24 +98,24 @@ class PlaySession:
 
     @property
     def backend(self) -> Backend | None:
-        return self.app.backend
+        return self.runner.backend
 
     @property
     def ticks(self) -> int:
-        return self.app.ticks
+        return self.runner.ticks
 
     def resize(self, size: Sequence[int]) -> None:
-        if self.app.backend is not None and tuple(size) != self.app.size:
-            self.app.size = size
+        if self.runner.backend is not None and tuple(size) != self.runner.size:
+            self.runner.size = size
 
     def step(self, dt: float, state: InputState = NO_INPUT) -> Frame | None:
         """One tick with this frame's input; a backend that fails leaves movement running without renders."""
         self.input.state = state
         self.elapsed += dt
         try:
-            return self.app.tick(dt)
+            return self.runner.tick(dt)
         except AberrantError as e:
-            if self.app.backend is None:
+            if self.runner.backend is None:
                 raise
             self.error = f"{e} (play continues without the tracer: preview only)"
             self._drop_backend()
@@ -122,10 +123,10 @@ class PlaySession:
 
     def _drop_backend(self) -> None:
         """Keep playing with movement and teleport only (the camera pose lives in the scene, so nothing jumps)."""
-        ticks = self.app.ticks
-        self.app.close()
-        self.app = App(self.scene, None, input_source=self.input)
-        self.app.ticks = ticks
+        ticks = self.runner.ticks
+        self.runner.close()
+        self.runner = App(self.scene, None, input_source=self.input)
+        self.runner.ticks = ticks
 
     @property
     def camera_view(self) -> CameraView:
@@ -134,5 +135,5 @@ class PlaySession:
 
     def stop(self) -> None:
         """Discard the played copy (idempotent)."""
-        self.app.close()
+        self.runner.close()
         self.scene.close()

@@ -42,7 +42,8 @@ def initial_view(model: EditorModel) -> EditorView:
 
 
 class EditorUi:
-    """Panels and the state between frames; owns the play session."""
+    """Panels and the state between frames; owns the play session. The menus and the viewport see it as
+    their :class:`~editor.panels.shell.EditorShell`."""
 
     def __init__(self, model: EditorModel, host: BackendHost | None = None, images: ImageSource | None = None) -> None:
         self.model = model
@@ -86,6 +87,9 @@ class EditorUi:
 
     def view_from_camera(self) -> None:
         self.view = initial_view(self.model)
+
+    def rename_selection(self) -> None:
+        self.hierarchy.start_rename(self.model)
 
     # --- dialogs ------------------------------------------------------------------------------
 
@@ -179,7 +183,7 @@ class EditorUi:
         self._step_play(dt)
         self._status_bar()
         self._dockspace()
-        draw_main_menu(self)
+        draw_main_menu(self, self.viewport)
         self.hierarchy.draw(self.model)
         self.inspector.draw(self.model)
         draw_backend_panel(self.host, playing=self.playing)
@@ -251,7 +255,7 @@ class EditorUi:
         elif pressed(imgui.Key.delete, False) and model.selected is not None:
             model.delete(model.selected)
         elif pressed(imgui.Key.f2, False):
-            self.hierarchy.start_rename(model)
+            self.rename_selection()
         elif pressed(imgui.Key.f5, False):
             self.start_play()
 

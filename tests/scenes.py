@@ -22,6 +22,7 @@ from test_parity import Comparison, assert_clean, compare, render
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from backends.reference.backend import ReferenceBackend
+from backends.upload import SceneUploader
 from components import Aberration, Mesh, Transform
 from engine.maths import trs_inverse
 from engine.packing import ScenePacker, scene_camera
@@ -238,14 +239,11 @@ def upload_to_reference(scene: Scene) -> ReferenceBackend:
 
 
 def upload(backend: Backend, scene: Scene) -> ScenePacker:
-    """Pack ``scene`` as ``backend`` wants it and upload it; the packer is kept for later syncs."""
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return packer
+    """Pack ``scene`` as ``backend`` wants it and upload it; the packer is kept for later syncs (tests that
+    drive ``backend.upload`` by hand)."""
+    uploader = SceneUploader(backend)
+    uploader.sync(scene)
+    return uploader.packer
 
 
 def render_aovs(backend: Backend, scene: Scene, width: int = 48, height: int = 36, aovs=AOVS) -> Frame:

@@ -21,12 +21,12 @@ from aberrant.bench.metrics import Timing, compare
 from aberrant.bench.reference import ReferenceCache
 from aberrant.bench.sweeps import Setting
 from backends.base import AOVS, Backend, backend_class, probe
+from backends.upload import SceneUploader
 from components import Mesh, Transform
 from engine.bvh import BvhParams, build_bvh
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import BackendUnavailable
 from engine.packed import PackedScene, TableUpdate
-from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: What the timed frames read back: the colour image, as the app and the CLI do.
@@ -135,21 +135,11 @@ class CellRunner:
         backend: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
         row["init_ms"] = _ms(start)
         try:
-            packer = ScenePacker(
-                precision=backend.precision,
-                camera_relative=backend.camera_relative,
-                bvh_params=BvhParams(max_leaf_size=setting.leaf),
-                bvh_width=backend.bvh_width,
-                bvh_compact=backend.bvh_compact,
-            )
-            start = time.perf_counter()
-            updates = packer.sync(scene, camera.position)
-            row["pack_ms"] = _ms(start)
-            packed = packer.packed
-            assert packed is not None
-            start = time.perf_counter()
-            row["upload_bytes"] = int(backend.upload(packed, updates))
-            row["upload_ms"] = _ms(start)
+            uploader = SceneUploader(backend, bvh_params=BvhParams(max_leaf_size=setting.leaf))
+            sent = uploader.sync(scene, camera.position)
+            row["pack_ms"] = sent.pack_ms
+            row["upload_bytes"] = sent.nbytes
+            row["upload_ms"] = sent.upload_ms
             start = time.perf_counter()
             frame = backend.render(camera, width, height, AOVS)  # compiles the variant: reported apart
             row["first_frame_ms"] = _ms(start)
@@ -178,7 +168,7 @@ class CellRunner:
                 row["embree_paired"] = self._paired(pair, frame)
             if baseline is not None:
                 row["baseline_paired"] = self._baseline(setting, baseline, size, frame)
-            self._ticks(scene, camera, packer, backend, row)
+            self._ticks(scene, camera, uploader, row)
         finally:
             backend.release()
 
@@ -208,17 +198,7 @@ class CellRunner:
         other: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
         try:
             camera = scene_camera(baseline)
-            params = BvhParams(max_leaf_size=setting.leaf)
-            packer = ScenePacker(
-                precision=other.precision,
-                camera_relative=other.camera_relative,
-                bvh_params=params,
-                bvh_width=other.bvh_width,
-                bvh_compact=other.bvh_compact,
-            )
-            updates = packer.sync(baseline, camera.position)
-            assert packer.packed is not None
-            other.upload(packer.packed, updates)
+            SceneUploader(other, bvh_params=BvhParams(max_leaf_size=setting.leaf)).sync(baseline, camera.position)
 
             def plain() -> object:
                 return other.render(camera, size[0], size[1], TIMED_AOVS)
@@ -229,11 +209,9 @@ class CellRunner:
             other.release()
 
     @staticmethod
-    def _ticks(scene: Scene, camera: CameraView, packer: ScenePacker, backend: Backend, row: dict) -> None:
+    def _ticks(scene: Scene, camera: CameraView, uploader: SceneUploader, row: dict) -> None:
         """Bytes a static tick and a one-entity-moved tick upload (the static one should be 0)."""
-        static = packer.sync(scene, camera.position)
-        assert packer.packed is not None
-        row["tick_static_bytes"] = int(backend.upload(packer.packed, static)) if static else 0
+        row["tick_static_bytes"] = uploader.sync(scene, camera.position).nbytes
         meshes = scene.query(Transform, Mesh)
         if not meshes:
             row["tick_moved_bytes"] = None
@@ -242,9 +220,9 @@ class CellRunner:
         moved = replace(transform, position=(transform.position[0] + 0.01, *transform.position[1:]))
         scene.set(entity, moved)
         try:
-            updates = packer.sync(scene, camera.position)
-            assert packer.packed is not None
-            row["tick_moved_bytes"] = int(backend.upload(packer.packed, updates)) if updates else 0
-            row["tick_moved_updates"] = describe_updates(packer.packed, updates)
+            sent = uploader.sync(scene, camera.position)
+            assert uploader.packed is not None
+            row["tick_moved_bytes"] = sent.nbytes
+            row["tick_moved_updates"] = describe_updates(uploader.packed, sent.updates)
         finally:
             scene.set(entity, transform)

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from backends.base import AOVS
+from backends.upload import SceneUploader
 from engine.camera_view import CameraView
-from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.scene_file import dumps, scene_document
 
@@ -34,6 +34,7 @@ CACHE_FORMAT = 1
 #: Sources whose edits change what the reference renders.
 _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.reference", "*.py"),
+    ("backends", "upload.py"),
     ("engine", "packing.py"),
     ("engine", "layout.py"),
 )
@@ -88,15 +89,7 @@ def render_reference(scene: Scene, camera: CameraView, size: tuple[int, int]) ->
 
     start = time.perf_counter()
     with ReferenceBackend() as backend:
-        packer = ScenePacker(
-            precision=backend.precision,
-            camera_relative=backend.camera_relative,
-            bvh_width=backend.bvh_width,
-            bvh_compact=backend.bvh_compact,
-        )
-        updates = packer.sync(scene, camera.position)
-        assert packer.packed is not None
-        backend.upload(packer.packed, updates)
+        SceneUploader(backend).sync(scene, camera.position)
         frame = backend.render(camera, size[0], size[1], AOVS)
     return {name: frame.aov(name) for name in AOVS}, (time.perf_counter() - start) * 1e3
 

@@ -2,42 +2,40 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from imgui_bundle import imgui
 
 from demos import demo_names, describe
 from editor.panels import widgets as ui
+from editor.panels.shell import EditorShell
+from editor.panels.viewport import ViewportPanel
 from engine.assets import PRIMITIVES
 
-if TYPE_CHECKING:
-    from editor.ui import EditorUi
 
-
-def draw_main_menu(app: EditorUi) -> None:
+def draw_main_menu(shell: EditorShell, viewport: ViewportPanel) -> None:
+    """The menu bar; View switches ``viewport`` between the traced frame and the raster preview."""
     if not imgui.begin_main_menu_bar():
         return
-    _file_menu(app)
-    _edit_menu(app)
-    _add_menu(app)
-    _view_menu(app)
-    if app.playing:
+    _file_menu(shell)
+    _edit_menu(shell)
+    _add_menu(shell)
+    _view_menu(shell, viewport)
+    if shell.playing:
         if ui.menu_item("Stop", "Esc"):
-            app.stop_play()
+            shell.stop_play()
     elif ui.menu_item("Play", "F5"):
-        app.start_play()
+        shell.start_play()
     imgui.end_main_menu_bar()
 
 
-def _file_menu(app: EditorUi) -> None:
+def _file_menu(shell: EditorShell) -> None:
     if not ui.begin_menu("File"):
         return
-    model = app.model
-    editing = not app.playing
+    model = shell.model
+    editing = not shell.playing
     if ui.menu_item("New", "Ctrl+N", editing):
         model.request("new")
     if ui.menu_item("Open...", "Ctrl+O", editing):
-        app.show_open_dialog()
+        shell.show_open_dialog()
     if ui.begin_menu("Open demo", editing):
         for name in demo_names():
             if ui.menu_item(f"demo {name}"):
@@ -48,18 +46,18 @@ def _file_menu(app: EditorUi) -> None:
     if ui.menu_item("Save", "Ctrl+S", editing):
         model.save()
     if ui.menu_item("Save as...", "Ctrl+Shift+S", editing):
-        app.show_save_dialog()
+        shell.show_save_dialog()
     imgui.separator()
     if ui.menu_item("Quit", "Ctrl+Q"):
-        app.request_quit()
+        shell.request_quit()
     imgui.end_menu()
 
 
-def _edit_menu(app: EditorUi) -> None:
+def _edit_menu(shell: EditorShell) -> None:
     if not ui.begin_menu("Edit"):
         return
-    model = app.model
-    editing = not app.playing
+    model = shell.model
+    editing = not shell.playing
     top = model.undo_stack[-1].label if model.undo_stack else ""
     after = model.redo_stack[-1].label if model.redo_stack else ""
     if ui.menu_item(f"Undo {top}###Undo", "Ctrl+Z", editing and model.can_undo):
@@ -70,7 +68,7 @@ def _edit_menu(app: EditorUi) -> None:
     entity = model.selected
     has = editing and entity is not None
     if ui.menu_item("Rename##edit", "F2", has):
-        app.hierarchy.start_rename(model)
+        shell.rename_selection()
     if ui.menu_item("Duplicate##edit", "Ctrl+D", has) and entity is not None:
         model.duplicate(entity)
     if ui.menu_item("Delete##edit", "Del", has) and entity is not None:
@@ -78,18 +76,18 @@ def _edit_menu(app: EditorUi) -> None:
     imgui.end_menu()
 
 
-def _add_menu(app: EditorUi) -> None:
-    if not ui.begin_menu("Add", not app.playing):
+def _add_menu(shell: EditorShell) -> None:
+    if not ui.begin_menu("Add", not shell.playing):
         return
-    model = app.model
-    spot = app.spawn_point()
+    model = shell.model
+    spot = shell.spawn_point()
     if ui.begin_menu("Mesh primitive"):
         for primitive in PRIMITIVES:
             if ui.menu_item(primitive):
                 model.add_primitive(primitive, spot)
         imgui.end_menu()
     if ui.menu_item("Mesh from file..."):
-        app.show_import_dialog()
+        shell.show_import_dialog()
     imgui.separator()
     if ui.menu_item("Aberration"):
         model.add_aberration(spot)
@@ -100,20 +98,19 @@ def _add_menu(app: EditorUi) -> None:
     imgui.separator()
     label = "Camera to view" if model.scene.camera_entity is not None else "Camera at view"
     if ui.menu_item(label):
-        model.add_camera(app.view.transform())
+        model.add_camera(shell.view.transform())
     ui.tooltip("the scene's camera takes the viewport's position and direction")
     imgui.end_menu()
 
 
-def _view_menu(app: EditorUi) -> None:
+def _view_menu(shell: EditorShell, viewport: ViewportPanel) -> None:
     if not ui.begin_menu("View"):
         return
-    if ui.menu_item("Frame selection", "F", app.model.selected is not None):
-        app.focus_selection()
-    if ui.menu_item("View from scene camera", "", app.model.scene.camera_entity is not None):
-        app.view_from_camera()
+    if ui.menu_item("Frame selection", "F", shell.model.selected is not None):
+        shell.focus_selection()
+    if ui.menu_item("View from scene camera", "", shell.model.scene.camera_entity is not None):
+        shell.view_from_camera()
     imgui.separator()
-    viewport = app.viewport
     if ui.menu_item("Traced frame", "", True, viewport.mode == "traced"):
         viewport.mode = "traced"
     if ui.menu_item("Raster preview", "", True, viewport.mode == "raster"):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from imgui_bundle import imgui, imguizmo
@@ -19,12 +18,10 @@ from imgui_bundle import imgui, imguizmo
 from components import Transform
 from editor.gizmo import MODES, OPERATIONS, GizmoSettings, matrix_to_transform, transform_matrix
 from editor.panels import widgets as ui
+from editor.panels.shell import EditorShell
 from editor.picking import pick
 from editor.play import Keys
 from editor.view import column_major, perspective, view_matrix
-
-if TYPE_CHECKING:
-    from editor.ui import EditorUi
 
 gizmo = imguizmo.im_guizmo
 
@@ -93,18 +90,18 @@ class ViewportPanel:
 
     # --- drawing -------------------------------------------------------------------------
 
-    def draw(self, app: EditorUi, images: ImageSource | None) -> None:
+    def draw(self, shell: EditorShell, images: ImageSource | None) -> None:
         imgui.push_style_var(imgui.StyleVar_.window_padding.value, (4, 4))
         flags = imgui.WindowFlags_.no_scrollbar | imgui.WindowFlags_.no_scroll_with_mouse | imgui.WindowFlags_.no_move
         visible = imgui.begin("Viewport", None, flags)
         imgui.pop_style_var()
         if visible:
-            self._toolbar(app)
+            self._toolbar(shell)
             avail = imgui.get_content_region_avail()
             self.size = (max(int(avail.x), 16), max(int(avail.y), 16))
             pos = imgui.get_cursor_screen_pos()
             self.origin = (pos.x, pos.y)
-            request = ViewRequest(self.size, self.mode, self._moving and self.fast_while_moving, app.playing)
+            request = ViewRequest(self.size, self.mode, self._moving and self.fast_while_moving, shell.playing)
             drawn = images(request) if images is not None else []
             draw_list = imgui.get_window_draw_list()
             corner = (pos.x + self.size[0], pos.y + self.size[1])
@@ -119,14 +116,14 @@ class ViewportPanel:
             self.hovered = inside and imgui.is_window_hovered()
             self._track_buttons()
             self._moving = False
-            if app.playing:
-                self._overlay_play(app, pos)
+            if shell.playing:
+                self._overlay_play(shell, pos)
             else:
-                self._controls(app)
-                self._gizmo(app, pos)
+                self._controls(shell)
+                self._gizmo(shell, pos)
                 clicked = self._released[0] and not self._gizmo_at_press
                 if clicked and imgui.get_io().mouse_drag_max_distance_sqr[0] < 16.0:
-                    self._pick(app)
+                    self._pick(shell)
         imgui.end()
 
     def _track_buttons(self) -> None:
@@ -141,14 +138,14 @@ class ViewportPanel:
                 self._held[button] = False
                 self._released[button] = True
 
-    def _toolbar(self, app: EditorUi) -> None:
-        if app.playing:
+    def _toolbar(self, shell: EditorShell) -> None:
+        if shell.playing:
             if ui.button("Stop (Esc)"):
-                app.stop_play()
+                shell.stop_play()
         elif ui.button("Play"):
-            app.start_play()
+            shell.start_play()
         imgui.same_line()
-        imgui.begin_disabled(app.playing)
+        imgui.begin_disabled(shell.playing)
         for op in OPERATIONS:
             imgui.same_line()
             if ui.radio(op, self.gizmo.operation == op):
@@ -169,8 +166,8 @@ class ViewportPanel:
         _, self.mode = ui.combo("##view mode", self.mode, ["traced", "raster"])
         ui.tooltip("traced: the backend's frame with preview lines; raster: the fast preview only")
 
-    def _overlay_play(self, app: EditorUi, pos: imgui.ImVec2) -> None:
-        session = app.play
+    def _overlay_play(self, shell: EditorShell, pos: imgui.ImVec2) -> None:
+        session = shell.play
         if session is None:
             return
         text = f"PLAY  {session.elapsed:6.1f} s  WASD move, mouse look, Shift sprint, Esc stop"
@@ -188,9 +185,9 @@ class ViewportPanel:
 
     # --- edit-mode controls -------------------------------------------------------------------
 
-    def _controls(self, app: EditorUi) -> None:
+    def _controls(self, shell: EditorShell) -> None:
         io = imgui.get_io()
-        view = app.view
+        view = shell.view
         if self._held[1]:
             view.look(io.mouse_delta.x * LOOK_SENSITIVITY, -io.mouse_delta.y * LOOK_SENSITIVITY)
             down = imgui.is_key_down
@@ -212,16 +209,16 @@ class ViewportPanel:
                 if imgui.is_key_pressed(key, False):
                     self.gizmo.operation = op
             if imgui.is_key_pressed(imgui.Key.f, False):
-                app.focus_selection()
+                shell.focus_selection()
 
-    def _pick(self, app: EditorUi) -> None:
+    def _pick(self, shell: EditorShell) -> None:
         mouse = imgui.get_mouse_pos()
         x, y = mouse.x - self.origin[0], mouse.y - self.origin[1]
-        origin, direction = app.view.ray(x, y, *self.size)
-        app.model.select(pick(app.model.scene, origin, direction))
+        origin, direction = shell.view.ray(x, y, *self.size)
+        shell.model.select(pick(shell.model.scene, origin, direction))
 
-    def _gizmo(self, app: EditorUi, pos: imgui.ImVec2) -> None:
-        model = app.model
+    def _gizmo(self, shell: EditorShell, pos: imgui.ImVec2) -> None:
+        model = shell.model
         entity = model.selected
         transform = None if entity is None else model.scene.try_get(entity, Transform)
         if entity is None or transform is None:
@@ -230,7 +227,7 @@ class ViewportPanel:
         gizmo.set_rect(pos.x, pos.y, float(self.size[0]), float(self.size[1]))
         gizmo.set_orthographic(False)
         gizmo.set_gizmo_size_clip_space(GIZMO_SIZE)
-        camera = app.view.camera()
+        camera = shell.view.camera()
         view16 = gizmo.Matrix16(column_major(view_matrix(camera)))
         proj16 = gizmo.Matrix16(column_major(perspective(camera.fov_deg, self.size[0] / self.size[1])))
         matrix = gizmo.Matrix16(column_major(transform_matrix(transform)))

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from aberrant.bench.scenes import mesh_10k, mesh_200k, ten_boxes, ten_boxes_aberration, ten_boxes_portals
+from backends.upload import SceneUploader
 from engine.camera_view import scene_camera
-from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: (backend, precision) pairs benchmarked. The OpenCL backend slots in here.
@@ -67,12 +67,9 @@ def assets(tmp_path_factory) -> Path:
 
 def _bench(benchmark, backend, scene: Scene, rounds: int | None = None) -> None:
     """Upload once, then time whole frames (dispatch and read-back of the colour)."""
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
+    uploader = SceneUploader(backend)
+    uploader.sync(scene)
+    assert uploader.packed is not None
     camera = scene_camera(scene)
     # Compiles the variants (a small frame where a frame is slow) and measures the coverage.
     size = (WIDTH, HEIGHT) if rounds is None else (64, 64)
@@ -83,7 +80,7 @@ def _bench(benchmark, backend, scene: Scene, rounds: int | None = None) -> None:
         benchmark.pedantic(backend.render, args=(camera, WIDTH, HEIGHT, AOVS), rounds=rounds, iterations=1)
     median = benchmark.stats.stats.median
     benchmark.extra_info["mrays_per_s"] = round(WIDTH * HEIGHT / median / 1e6, 3)
-    benchmark.extra_info["triangles"] = int(packer.packed.counts["triangles"])
+    benchmark.extra_info["triangles"] = int(uploader.packed.counts["triangles"])
     benchmark.extra_info["coverage"] = round(float(np.mean(first.instance >= 0)), 3)
     benchmark.extra_info["events"] = round(float(np.mean(first.events)), 3)
     benchmark.extra_info["backend"] = f"{backend.name}-{backend.precision}"

@@ -23,17 +23,15 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pytest
-from scenes import EVERY, FAST, ReferenceFrames, aim, aimed_pixel, assert_agrees, render_scene
+from scenes import EVERY, FAST, ReferenceFrames, aim, aimed_pixel, assert_agrees, render_scene, upload_to_reference
 from test_parity import FAR, assert_clean, compare, translated
 from test_parity_portals import rooms
 
 from backends.base import AOVS, Backend, Frame
-from backends.reference.backend import ReferenceBackend
 from backends.reference.shading import to_uint8
 from components import Transform
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix
-from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
 from systems.app import App
@@ -97,14 +95,8 @@ def step(scene: Scene, move: Vec3, ticks: int = 1, speed: float = 3.0, dt: float
 
 def reference_ray(scene: Scene, origin: Sequence[float], direction: Sequence[float]) -> tuple[int, int]:
     """(events, instance) of one exact float64 ray through the scene."""
-    backend = ReferenceBackend()
+    backend = upload_to_reference(scene)
     try:
-        packer = ScenePacker(
-            precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-        )
-        updates = packer.sync(scene)
-        assert packer.packed is not None
-        backend.upload(packer.packed, updates)
         d = np.asarray(direction, dtype=np.float64)
         result = backend.trace_rays(np.asarray(origin, dtype=np.float64), (d / np.linalg.norm(d))[None])
         return int(result.events[0]), int(result.instance[0])

@@ -21,11 +21,11 @@ import trimesh
 from aberrant.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from backends.base import AOVS, Frame
 from backends.reference.backend import ReferenceBackend
+from backends.upload import SceneUploader
 from components import Transform
 from demos import starter
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError
-from engine.packing import ScenePacker
 from engine.scene import Scene
 
 #: (backend, precision) pairs measured against the reference. The OpenCL backend slots in here.
@@ -120,14 +120,7 @@ def render(
 ) -> Frame:
     """Pack for ``backend`` (camera-relative or not; its BVH width and compactness unless given), upload,
     render every AOV."""
-    width = backend.bvh_width if bvh_width is None else bvh_width
-    compact = (backend.bvh_compact and width == 2) if bvh_compact is None else bvh_compact
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=width, bvh_compact=compact
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
+    SceneUploader(backend, bvh_width=bvh_width, bvh_compact=bvh_compact).sync(scene)
     return backend.render(scene_camera(scene), size[0], size[1], AOVS)
 
 
@@ -252,18 +245,14 @@ def test_incremental_uploads_while_the_camera_and_an_entity_move(backend_factory
     backend = backend_factory(backend_name, precision)
     reference = ReferenceBackend()
     scene = random_boxes(20, seed=9)
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
+    uploader = SceneUploader(backend)
     mover = scene.entity("box3")
     try:
         for step in range(4):
             scene.set_camera((0.5 + 9.0 * step, 1.0, 8.0 - 7.0 * step), look_at=(0.0, 0.0, -2.0), fov_deg=65.0)
             transform = scene.get(mover, Transform)
             scene.set(mover, replace(transform, position=(0.3 * step, 0.5, -1.0)))
-            updates = packer.sync(scene)
-            assert packer.packed is not None
-            backend.upload(packer.packed, updates)
+            uploader.sync(scene)
             fast = backend.render(scene_camera(scene), 64, 48, AOVS)
             ref = render(reference, scene, (64, 48))
             assert_clean(fast)
@@ -309,15 +298,12 @@ def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, preci
 def test_glsl_refuses_eight_wide_trees(backend_factory, precision):
     """8-wide nodes are read as float8: GLSL has no 8-vectors, so its backend refuses the width by name."""
     backend = backend_factory("glsl", precision)
-    packer = ScenePacker(precision=precision, camera_relative=True, bvh_width=8)
     scene = random_boxes(count=5)
     try:
-        updates = packer.sync(scene)
+        with pytest.raises(AberrantError, match="BVH widths 2, 4, not 8"):
+            SceneUploader(backend, bvh_width=8).sync(scene)
     finally:
         scene.close()
-    assert packer.packed is not None
-    with pytest.raises(AberrantError, match="BVH widths 2, 4, not 8"):
-        backend.upload(packer.packed, updates)
 
 
 @pytest.mark.parametrize(

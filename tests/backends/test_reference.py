@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scenes import upload as upload_packed
 
 from backends.base import AOVS, backend_class
 from backends.reference.backend import ReferenceBackend
 from backends.reference.intersect import intersect_triangles, shear_rays
 from backends.reference.trace import to_uint8
 from backends.reference.traverse import Geometry, nearest_mesh_hits
+from backends.upload import SceneUploader
 from components import Transform
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
@@ -28,13 +30,7 @@ from engine.settings import Settings
 def upload(scene: Scene) -> tuple[ReferenceBackend, ScenePacker]:
     """A fresh backend holding ``scene``, packed the way a driver would pack it."""
     backend = ReferenceBackend()
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return backend, packer
+    return backend, upload_packed(backend, scene)
 
 
 def render(scene: Scene, width: int, height: int):
@@ -74,12 +70,10 @@ def test_backend_contract():
     scene = Scene()
     scene.add_mesh("box", "box")
     face_camera(scene, 5.0)
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    assert backend.upload(packer.packed, updates) == packer.packed.update_bytes(updates) > 0
+    uploader = SceneUploader(backend)
+    sent = uploader.sync(scene)
+    assert uploader.packed is not None
+    assert sent.nbytes == uploader.packed.update_bytes(sent.updates) > 0
     with pytest.raises(AberrantError, match="AOV"):
         backend.render(scene_camera(scene), 4, 4, aovs=("colour",))
 

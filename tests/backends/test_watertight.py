@@ -8,24 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scenes import upload_to_reference as upload
 
-from backends.reference.backend import ReferenceBackend
 from backends.reference.intersect import exact_sign_of_difference, intersect_triangles, shear_rays
 from backends.reference.traverse import nearest_mesh_hits
 from engine.camera_view import scene_camera
-from engine.packing import ScenePacker
 from engine.scene import Scene
-
-
-def upload(scene: Scene) -> ReferenceBackend:
-    backend = ReferenceBackend()
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width
-    )
-    updates = packer.sync(scene)
-    assert packer.packed is not None
-    backend.upload(packer.packed, updates)
-    return backend
 
 
 def grid_cube(n: int) -> trimesh.Trimesh:

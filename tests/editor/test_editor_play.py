@@ -45,7 +45,7 @@ def test_play_moves_and_teleports_through_the_real_systems_then_stop_restores():
         position = session.camera_view.position
         assert position[0] == pytest.approx(10.0, abs=1e-6)
         assert position[2] < 0.0
-        assert session.app.teleport is not None and session.ticks == 30
+        assert session.runner.teleport is not None and session.ticks == 30
     finally:
         session.stop()
     assert scene_to_json(edited) == before

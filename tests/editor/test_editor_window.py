@@ -30,7 +30,7 @@ SIZE = (1280, 800)
 #: Runs in the subprocess: open the editor on a scene, draw frames, screenshot, report as JSON.
 SCRIPT = r"""
 import json, sys, time
-from editor.app import EditorWindow, load_target
+from editor.window import EditorWindow, load_target
 args = json.loads(sys.argv[1])
 model = load_target("starter")
 if args["overlays"]:

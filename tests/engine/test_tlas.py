@@ -8,10 +8,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from conftest import require_backend
+from scenes import upload_to_reference
 from test_parity import DEPTH_MEDIAN_MAX, F64_DEPTH_P99_MAX, FAST_BACKENDS, MISMATCH_MAX, assert_clean, compare
 
 from backends.base import AOVS
-from backends.reference.backend import ReferenceBackend
+from backends.upload import SceneUploader
 from components import Transform
 from engine.camera_view import scene_camera
 from engine.layout import TLAS_NODE_DTYPE
@@ -215,16 +216,6 @@ def test_origin_shift_moves_the_tree_with_the_instances() -> None:
 # --- frames --------------------------------------------------------------------------------------------
 
 
-_last: list[TableUpdate] = []
-
-
-def _sync(packer: ScenePacker, scene: Scene):
-    """Sync and keep the updates in ``_last`` (so one expression can upload both)."""
-    _last[:] = packer.sync(scene)
-    assert packer.packed is not None
-    return packer.packed
-
-
 @pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
 def test_moved_instances_render_as_the_reference_sees_them(backend_factory, backend_name, precision) -> None:
     """60 boxes; some moved within their fat leaves, some far (refits), uploaded incrementally: the
@@ -234,17 +225,15 @@ def test_moved_instances_render_as_the_reference_sees_them(backend_factory, back
     scene = many_boxes()
     size = (96, 72)
     try:
-        packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative)
-        backend.upload(_sync(packer, scene), list(_last))
+        uploader = SceneUploader(backend)
+        uploader.sync(scene)
         for name, by in (("box1", (0.02, 0.0, 0.0)), ("box2", (-4.0, 1.0, 2.0)), ("box9", (3.0, -1.0, -5.0))):
             move(scene, name, by)
-            backend.upload(_sync(packer, scene), list(_last))
-        assert backend.read_table("tlas_nodes")[: packer.tlas.nodes.nbytes] == packer.tlas.nodes.tobytes()
+            uploader.sync(scene)
+        tree = uploader.packer.tlas.nodes
+        assert backend.read_table("tlas_nodes")[: tree.nbytes] == tree.tobytes()
         fast = backend.render(scene_camera(scene), *size, AOVS)
-        reference = ReferenceBackend()
-        ref_packer = ScenePacker(precision="f64", camera_relative=False)
-        reference.upload(_sync(ref_packer, scene), list(_last))
-        truth = reference.render(scene_camera(scene), *size, AOVS)
+        truth = upload_to_reference(scene).render(scene_camera(scene), *size, AOVS)
     finally:
         scene.close()
     assert_clean(fast)
@@ -268,7 +257,7 @@ def test_the_tree_and_the_loop_give_identical_frames(backend_factory, backend_na
     scene.add_mesh("twin2", "box", position=(0.0, 0.0, -2.0), scale=1.5)
     twin = scene.entity("twin")
     try:
-        backend.upload(_sync(ScenePacker(), scene), list(_last))
+        SceneUploader(backend).sync(scene)
         frames = []
         for use in (1, 0):
             backend.extra_defines = {"USE_TLAS": use}
