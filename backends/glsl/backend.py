@@ -135,7 +135,7 @@ class GlslBackend(shared.UploadedScene, Backend):
 
     name: ClassVar[str] = "glsl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
-    camera_relative: ClassVar[bool] = True
+    camera_relative: bool = True
     #: Compact records: a visit loads 2 texels instead of 4 (llvmpipe gathers texels at a bounded rate).
     bvh_compact: ClassVar[bool] = True
 

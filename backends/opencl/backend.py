@@ -214,7 +214,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
 
     name: ClassVar[str] = "opencl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
-    camera_relative: ClassVar[bool] = True
+    camera_relative: bool = True
     #: 8-wide nodes tested with float8 operations: PoCL runs each work-item as scalar code, so the
     #: vector width is what a CPU core's SIMD gets (one AVX2 register per bound component). Against
     #: 4-wide (PoCL 3.1, 800x800, CPU time per frame, interleaved): -3 % on the 10k torus, -4 % on the
