@@ -164,8 +164,8 @@ def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from backends.base import AOVS
-    from systems.app import render_once
     from engine.atomic_files import write_atomically
+    from systems.app import render_once
 
     if args.path:
         return cmd_render_path(args)

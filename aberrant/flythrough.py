@@ -37,15 +37,15 @@ from typing import TYPE_CHECKING, Protocol, TextIO
 
 import numpy as np
 
+from aberrant.progress import Progress
 from backends.base import Backend
 from components import Camera, Transform
-from systems.app import App
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.input import NoInput
 from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
-from aberrant.progress import Progress
 from engine.scene import Scene
+from systems.app import App
+from systems.camera_path import CameraPath, Keyframe
 
 if TYPE_CHECKING:
     from PIL import Image

@@ -21,10 +21,10 @@ along world axes too, so strafing across the left half is twice as fast.
 from __future__ import annotations
 
 from demos.kit import CHALK, CHARCOAL, CORAL, GOLD, SAND, SLATE, TEAL, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 #: The two aberrations, exactly as in the thesis's file (D, centre, size).
 ABERRATIONS = {

@@ -22,10 +22,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from demos.kit import BLOCK, BLUE, CHALK, GOLD, GREEN, IVORY, PURPLE, RED, SAND, SLATE, Color, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 #: Inside width, height and length of every tunnel, and its wall thickness.
 WIDTH, HEIGHT, LENGTH, WALL = 2.6, 3.0, 10.0, 0.3

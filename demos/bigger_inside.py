@@ -17,10 +17,10 @@ of its speed and, having crossed the hall, looks back at the little door.
 from __future__ import annotations
 
 from demos.kit import CLAY, CORAL, GOLD, IVORY, LAWN, NAVY, SAND, SKY, TEAL, Color, Door, Vec3, block, room, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 HALF, HEIGHT, WALL = 2.0, 3.2, 0.25
 DOOR = Door(width=2.0, height=2.5)

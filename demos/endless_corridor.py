@@ -13,10 +13,10 @@ like: the flythrough walks three stretches and never reaches the light.
 from __future__ import annotations
 
 from demos.kit import CHALK, CLAY, GOLD, IVORY, NAVY, RED, SAND, TEAL, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 HALF_WIDTH, HEIGHT, HALF_LENGTH = 2.0, 3.2, 6.0
 #: Portal events before a ray gives up: about 115 units of corridor, a small square of light at the end.

@@ -31,11 +31,11 @@ from demos.kit import (
     room,
     use_blocks,
 )
-from systems.route import Stop, with_scene
 from demos.starter import KNOT_PATH
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 HEIGHT = 3.6
 #: Where the hall is, relative to the warm room (the portals map one onto the other by this shift).

@@ -38,10 +38,10 @@ from demos.kit import (
     room,
     use_blocks,
 )
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 WALL = 0.3
 DOOR = Door(width=2.0, height=2.5)

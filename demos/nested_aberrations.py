@@ -19,10 +19,10 @@ normal pace in magenta.
 from __future__ import annotations
 
 from demos.kit import CHALK, GOLD, IVORY, NAVY, ROSE, SAND, SKY, SLATE, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 ORANGE = (1.0, 0.55, 0.1)
 CYAN = (0.1, 0.8, 0.95)

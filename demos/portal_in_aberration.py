@@ -38,10 +38,10 @@ from demos.kit import (
     room,
     use_blocks,
 )
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 #: The door frames' opening (width, height) and where the three places are.
 OPENING = (2.0, 2.6)

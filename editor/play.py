@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from backends.base import Backend, Frame
-from systems.app import App
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
 from engine.scene import Scene
 from engine.scene_file import load_scene, scene_to_json
+from systems.app import App
 
 #: Degrees turned per pixel of mouse movement.
 MOUSE_SENSITIVITY = 0.15

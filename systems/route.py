@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.scene import Scene
 from systems.camera_movement import SpeedBox, active_box, first_face_crossing, speed_boxes
+from systems.camera_path import CameraPath, Keyframe
 from systems.portal_teleport import portal_links, segment_crossing
 
 #: Walking pace (perceived units per second) and turning rate (degrees per second) of the stops' timing.

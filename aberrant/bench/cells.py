@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from backends.base import AOVS, Backend, backend_class, probe
-from components import Mesh, Transform
 from aberrant.bench.metrics import Timing, compare
 from aberrant.bench.reference import ReferenceCache
 from aberrant.bench.sweeps import Setting
+from backends.base import AOVS, Backend, backend_class, probe
+from components import Mesh, Transform
 from engine.bvh import BvhParams, build_bvh
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import BackendUnavailable

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from backends.base import backend_class
-from components import Aberration, Mesh, Portal
 from aberrant.bench import embree
 from aberrant.bench.scenes import SceneSpec
+from backends.base import backend_class
+from components import Aberration, Mesh, Portal
 from engine.scene import Scene
 
 

@@ -22,12 +22,12 @@ import numpy as np
 
 from backends.base import AOVS, Backend, Frame, backend_class
 from components import Transform
-from systems.app import App
 from engine.camera_view import CameraView
 from engine.input import NoInput
 from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from systems.app import App
 
 ENTITIES = 1000
 TICKS = 60

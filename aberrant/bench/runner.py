@@ -18,8 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from backends.base import BACKENDS, backend_class
-from engine.atomic_files import write_atomically
 from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
@@ -30,9 +28,11 @@ from aberrant.bench.reference import ReferenceCache
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from aberrant.progress import Progress, clock
+from backends.base import BACKENDS, backend_class
+from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from aberrant.progress import Progress, clock
 from engine.scene import Scene
 
 FORMAT = "aberrant-bench"

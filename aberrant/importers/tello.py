@@ -40,13 +40,6 @@ from typing import Any
 
 import numpy as np
 
-from components import Aberration, Mesh, Portal, Transform, ValidationError
-from components.validation import real, vector
-from engine.atomic_files import write_atomically
-from engine.errors import AberrantError
-from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
-from engine.scene import Scene
-from engine.scene_file import save_scene
 from aberrant.importers.tello_format import (
     ABERRATION,
     CAMERA,
@@ -63,6 +56,13 @@ from aberrant.importers.tello_format import (
     read_mesh_resource,
     read_tello_document,
 )
+from components import Aberration, Mesh, Portal, Transform, ValidationError
+from components.validation import real, vector
+from engine.atomic_files import write_atomically
+from engine.errors import AberrantError
+from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
+from engine.scene import Scene
+from engine.scene_file import save_scene
 
 #: The thesis's box pivot: the centre of [-½,½]² × [0, 1] in its local space.
 BOX_CENTRE = np.array([0.0, 0.0, 0.5])

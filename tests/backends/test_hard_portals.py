@@ -31,12 +31,12 @@ from backends.base import AOVS, Backend, Frame
 from backends.reference.backend import ReferenceBackend
 from backends.reference.shading import to_uint8
 from components import Transform
-from systems.app import App
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix
 from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.app import App
 from systems.portal_teleport import MAX_CROSSINGS
 
 Vec3 = tuple[float, float, float]

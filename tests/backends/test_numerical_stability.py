@@ -81,9 +81,9 @@ from test_parity import assert_clean, compare, random_boxes
 from test_parity_aberrations import mixed_overlap, room
 from test_parity_portals import portal_in_aberrations, rooms
 
+from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from backends.base import Frame
 from components import Transform
-from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 

@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from aberrant.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from backends.base import AOVS, Frame
 from backends.reference.backend import ReferenceBackend
 from components import Transform
 from demos import starter
-from aberrant.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError
 from engine.packing import ScenePacker

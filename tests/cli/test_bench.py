@@ -23,10 +23,10 @@ from aberrant.bench.metrics import Timing, compare, geometric_mean, instance_mis
 from aberrant.bench.runner import make_config, run_bench, write_outputs
 from aberrant.bench.scenes import QUICK_SCENES, bench_scenes, ten_boxes
 from aberrant.bench.sweeps import check_sweeps, settings_for
-from engine.camera_view import scene_camera
 from aberrant.cli import main
-from engine.errors import AberrantError
 from aberrant.progress import Progress, clock
+from engine.camera_view import scene_camera
+from engine.errors import AberrantError
 from engine.settings import Settings
 
 # --- metrics ------------------------------------------------------------------------------------------------

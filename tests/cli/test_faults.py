@@ -33,13 +33,12 @@ from conftest import require_backend
 
 import backends.base
 import systems.app
-import engine.scene_file
+from aberrant.cli import main
 from backends.base import BACKENDS, Frame, backend_class, create_backend, probe
 from backends.reference.backend import ReferenceBackend
 from demos import build_demo
 from editor.backend_host import BackendHost
 from engine.camera_view import CameraView, scene_camera
-from aberrant.cli import main
 from engine.errors import AberrantError
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene, save_scene
@@ -473,10 +472,14 @@ def test_saving_into_a_folder_that_is_a_file(saved):
 
 def test_write_atomically_is_what_the_tello_importer_and_cli_share():
     """Every writer in the engine goes through the one atomic writer (so these faults cover them all)."""
-    import engine.atomic_files
     import aberrant.cli
-    import engine.scene_file
     import aberrant.importers.tello
+    import engine.atomic_files
+    import engine.scene_file
 
-    assert aberrant.importers.tello.write_atomically is engine.scene_file.write_atomically is engine.atomic_files.write_atomically
+    assert (
+        aberrant.importers.tello.write_atomically
+        is engine.scene_file.write_atomically
+        is engine.atomic_files.write_atomically
+    )
     assert "write_atomically" in Path(aberrant.cli.__file__).read_text()

@@ -11,13 +11,13 @@ import pytest
 from PIL import Image
 
 import aberrant.flythrough as flythrough
+from aberrant.cli import main
+from aberrant.flythrough import default_path, mp4_unavailable, path_for, render_flythrough
 from backends.base import create_backend
 from components import Transform
 from demos import DEMOS, build_demo
-from systems.camera_path import CameraPath, Keyframe
-from aberrant.cli import main
 from engine.errors import AberrantError
-from aberrant.flythrough import default_path, mp4_unavailable, path_for, render_flythrough
+from systems.camera_path import CameraPath, Keyframe
 
 SIZE = (48, 36)
 

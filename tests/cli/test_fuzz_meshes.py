@@ -31,11 +31,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from engine.assets import AssetError, AssetLibrary, MeshAsset, make_asset
 from aberrant.cli import main
+from aberrant.importers.tello import read_mesh_resource
+from engine.assets import AssetError, AssetLibrary, MeshAsset, make_asset
 from engine.errors import AberrantError
 from engine.scene_file import SceneFileError, load_scene
-from aberrant.importers.tello import read_mesh_resource
 
 ROOT = Path(__file__).resolve().parents[2]
 TELLO = Path(__file__).resolve().parents[2] / "tests" / "data" / "tello"

@@ -30,10 +30,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from aberrant.cli import main
 from components import Aberration, Transform
 from demos import build_demo, demo_names
 from engine.assets import PRIMITIVES
-from aberrant.cli import main
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene, save_scene
 

@@ -9,16 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from components import Aberration, Mesh, Portal, Transform
 from aberrant.cli import main
+from aberrant.importers.tello import TelloError, import_tello, read_mesh_resource
+from components import Aberration, Mesh, Portal, Transform
 from engine.maths import quat_to_matrix, trs_matrix
 from engine.scene_file import load_scene
-from aberrant.importers.tello import TelloError, import_tello, read_mesh_resource
 
 REPO = Path(__file__).resolve().parents[2]
 TELLO = REPO / "tests" / "data" / "tello"
 BOX = -753313173  # the unit box resource: [-1/2, 1/2]^2 x [0, 1]
-
 
 
 def raw(name: str) -> dict:

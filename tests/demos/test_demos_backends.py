@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from aberrant.importers.tello import import_tello
 from components import Transform
 from demos import build_demo, demo_names
-from systems.app import App, render_once
 from engine.input import InputState, ScriptedInput
 from engine.scene import Scene
-from aberrant.importers.tello import import_tello
+from systems.app import App, render_once
 
 SIZE = (64, 48)
 FAST = [("glsl", "f32"), ("opencl", "f32"), ("opencl", "f64")]

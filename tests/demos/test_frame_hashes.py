@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import require_backend
 
 from backends.base import AOVS, Backend, Frame
-from conftest import require_backend
 from demos import build_demo, demo_names
 from systems.app import render_once
 
@@ -39,7 +39,9 @@ def device_of(backend: Backend) -> str:
 
 @pytest.mark.parametrize(("backend_name", "precision"), VARIANTS, ids=[f"{b}-{p}" for b, p in VARIANTS])
 @pytest.mark.parametrize("demo", demo_names())
-def test_demo_frame_is_bit_identical_to_the_record(demo: str, backend_name: str, precision: str, backend_factory) -> None:
+def test_demo_frame_is_bit_identical_to_the_record(
+    demo: str, backend_name: str, precision: str, backend_factory
+) -> None:
     record = json.loads(RECORD.read_text())
     require_backend(backend_name)
     backend = backend_factory(backend_name, precision if backend_name != "reference" else None)

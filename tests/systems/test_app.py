@@ -10,12 +10,12 @@ import pytest
 
 from backends.base import AOVS, Backend, Frame, create_backend
 from components import Transform
-from systems.app import App, render_once
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
 from engine.input import InputSource, InputState, NoInput, ScriptedInput
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from systems.app import App, render_once
 from systems.camera_movement import CameraMovementProcessor
 from systems.gpu_upload import GpuUploadProcessor
 from systems.portal_teleport import PortalTeleportProcessor

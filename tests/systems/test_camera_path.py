@@ -10,10 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from components import Camera, Transform
-from systems.app import App
-from systems.camera_path import CameraPath, CameraPathError, Keyframe, yaw_pitch, yaw_pitch_quat
 from engine.maths import quat_from_axis_angle, quat_to_matrix
 from engine.scene import Scene
+from systems.app import App
+from systems.camera_path import CameraPath, CameraPathError, Keyframe, yaw_pitch, yaw_pitch_quat
 
 DT = 1.0 / 30.0
 

@@ -20,12 +20,12 @@ import itertools
 
 import numpy as np
 
-from systems.app import App
 from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.app import App
 
 #: Corridor B = X(corridor A): a quarter turn about y, then far away.
 TURN_DEG = 90.0

@@ -11,13 +11,13 @@ import pytest
 from backends.base import AOVS, Backend, Frame
 from components import Camera, Transform
 from engine import layout
-from systems.app import App
 from engine.camera_view import CameraView
 from engine.errors import SceneError
 from engine.input import InputState, NoInput, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from systems.app import App
 from systems.camera_movement import MAX_SUBSTEPS, SPRINT_MULTIPLIER, speed_boxes, walk
 from systems.portal_teleport import MAX_CROSSINGS
 
