@@ -50,7 +50,7 @@ help:
 	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
 	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
 	echo "  make gallery render every demo into docs/gallery/ (the README's gallery)"
-	echo "  make lint    ruff check + ruff format --check"
+	echo "  make lint    ruff check + ruff format --check + mypy (the packages; configured in pyproject.toml)"
 	echo "  make format  ruff format + ruff check --fix"
 	echo "  make setup   only install (apt packages, .venv, the package in editable mode)"
 	echo "  make clean   remove .venv and caches"
@@ -158,6 +158,8 @@ lint: | apt-packages $(INSTALLED)
 	"$(VENV)/bin/ruff" check . || status=1
 	echo "==> ruff format --check"
 	"$(VENV)/bin/ruff" format --check . || status=1
+	echo "==> mypy"
+	"$(VENV)/bin/mypy" || status=1
 	exit $$status
 
 format: | apt-packages $(INSTALLED)
@@ -166,5 +168,5 @@ format: | apt-packages $(INSTALLED)
 
 clean:
 	@echo "==> removing $(VENV), caches and build files"
-	rm -rf "$(VENV)" .pytest_cache .ruff_cache .cache build *.egg-info
+	rm -rf "$(VENV)" .pytest_cache .ruff_cache .mypy_cache .cache build *.egg-info
 	find . -path ./.git -prune -o -type d -name __pycache__ -print0 | xargs -0 rm -rf

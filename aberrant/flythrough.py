@@ -33,7 +33,7 @@ import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TextIO
+from typing import TYPE_CHECKING, Protocol, TextIO
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 from systems.app import App
 from systems.camera_path import CameraPath, Keyframe
+
+if TYPE_CHECKING:
+    from PIL import Image
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
@@ -107,15 +110,23 @@ def _even(rgb: np.ndarray) -> np.ndarray:
     return np.pad(rgb, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") if h % 2 or w % 2 else rgb
 
 
+class _FrameWriter(Protocol):
+    """What ``imageio_ffmpeg.write_frames`` returns: a generator, primed with ``send(None)``, then fed frames."""
+
+    def send(self, frame: np.ndarray | None, /) -> None: ...
+
+    def close(self) -> None: ...
+
+
 class _Sink:
     """Frames in, one output out: written to a temporary sibling, renamed by :meth:`commit`."""
 
     def __init__(self, out: Path, kind: str, fps: float) -> None:
         self.out, self.kind, self.fps = out, kind, fps
         self.tmp = out.with_name(f".{out.name}.{secrets.token_hex(4)}.tmp{out.suffix}")
-        self.frames: list[object] = []
+        self.frames: list[Image.Image] = []
         self.count = 0
-        self.writer: object = None
+        self.writer: _FrameWriter | None = None
         if kind == "png":
             self.tmp.mkdir()
 
@@ -136,21 +147,22 @@ class _Sink:
                     pix_fmt_in="rgb24", pix_fmt_out="yuv420p", macro_block_size=2, quality=8,
                     ffmpeg_log_level="error",
                 )  # fmt: skip
-                self.writer.send(None)  # type: ignore[attr-defined]
-            self.writer.send(np.ascontiguousarray(frame))  # type: ignore[attr-defined]
+                self.writer.send(None)
+            self.writer.send(np.ascontiguousarray(frame))
         self.count += 1
 
     def commit(self) -> None:
         if self.kind == "gif":
             buffer = io.BytesIO()
             first, *rest = self.frames
-            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))  # type: ignore[attr-defined]
+            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))
             with open(self.tmp, "wb") as f:
                 f.write(buffer.getvalue())
                 f.flush()
                 os.fsync(f.fileno())
         elif self.kind == "mp4":
-            self.writer.close()  # type: ignore[attr-defined]
+            assert self.writer is not None  # the first frame started it
+            self.writer.close()
             self.writer = None
         if self.kind == "png" and self.out.is_dir():
             old = self.out.with_name(f".{self.out.name}.{secrets.token_hex(4)}.old")
@@ -163,7 +175,7 @@ class _Sink:
     def discard(self) -> None:
         if self.writer is not None:
             with contextlib.suppress(Exception):
-                self.writer.close()  # type: ignore[attr-defined]
+                self.writer.close()
         if self.tmp.is_dir():
             shutil.rmtree(self.tmp, ignore_errors=True)
         else:

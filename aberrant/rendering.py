@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Callable, Sequence
+from typing import SupportsIndex, cast
 
 from backends.base import AOVS, Backend, Frame, create_backend
 from engine.errors import AberrantError
@@ -20,10 +21,10 @@ from systems.app import DEFAULT_SIZE, render_once
 def _frame_size(size: object) -> tuple[int, int]:
     """``size`` as ``(width, height)``: two whole numbers of pixels, both positive, or one AberrantError."""
     try:
-        width, height = size  # type: ignore[misc]
-        if isinstance(width, bool) or isinstance(height, bool):
+        first, second = cast("Sequence[object]", size)
+        if isinstance(first, bool) or isinstance(second, bool):
             raise TypeError("a bool is not a pixel count")
-        width, height = operator.index(width), operator.index(height)
+        width, height = operator.index(cast("SupportsIndex", first)), operator.index(cast("SupportsIndex", second))
     except (TypeError, ValueError):
         raise AberrantError(f"size must be (width, height) in whole pixels, e.g. (640, 480); got {size!r}") from None
     if width <= 0 or height <= 0:

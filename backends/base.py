@@ -75,8 +75,9 @@ class Backend(ABC):
             )
         self.precision: Precision = precision
 
-    #: Whether the packed tables should be relative to a floating origin near the camera.
-    camera_relative: ClassVar[bool] = True
+    #: Whether the packed tables should be relative to a floating origin near the camera (a wrapper backend
+    #: sets it per instance, to the wrapped one's).
+    camera_relative: bool = True
     #: The BVH width its packer should build (``ScenePacker(bvh_width=...)``): what it traverses fastest
     #: (a backend may set it per instance, e.g. by precision).
     bvh_width: int = 2

@@ -8,7 +8,7 @@ so scene files, the builder API and the editor can all say *which* field of
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence, Sized
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -41,16 +41,18 @@ def real(value: object, field: str) -> float:
 
 
 def vector(value: object, n: int, field: str) -> tuple[float, ...]:
-    if isinstance(value, str | bytes) or (not isinstance(value, Sequence) and not hasattr(value, "__len__")):
+    # Any sized iterable: lists and tuples from scene files and callers, NumPy arrays from the maths.
+    if isinstance(value, str | bytes) or not (isinstance(value, Iterable) and isinstance(value, Sized)):
         raise ValidationError(field, f"expected {n} numbers, got {type(value).__name__} {value!r}")
-    items = list(value)  # type: ignore[call-overload]
+    items = list(value)
     if len(items) != n:
         raise ValidationError(field, f"expected {n} numbers, got {len(items)}")
     return tuple(real(x, f"{field}[{i}]") for i, x in enumerate(items))
 
 
 def vec3(value: object, field: str) -> Vec3:
-    return vector(value, 3, field)  # type: ignore[return-value]
+    x, y, z = vector(value, 3, field)
+    return (x, y, z)
 
 
 def color(value: object, field: str) -> Color:
@@ -68,13 +70,14 @@ def unit_quaternion(value: object, field: str, tolerance: float = 1e-4) -> Quat:
         raise ValidationError(
             field, f"quaternion (x, y, z, w) must have unit length, got length {norm:.6g}; normalise it"
         )
-    return q  # type: ignore[return-value]
+    x, y, z, w = q
+    return (x, y, z, w)
 
 
 def choice(value: object, options: Sequence[str], field: str) -> str:
-    if value not in options:
+    if not isinstance(value, str) or value not in options:
         raise ValidationError(field, f"must be one of {', '.join(map(repr, options))}, got {value!r}")
-    return value  # type: ignore[return-value]
+    return value
 
 
 def boolean(value: object, field: str) -> bool:

@@ -74,7 +74,7 @@ class AddingMixin:
     def add_primitive(self, primitive: str, position: Sequence[float] = (0.0, 0.0, 0.0)) -> int | None:
         """A mesh entity of a built-in primitive (box, plane, quad, sphere, pyramid, cylinder)."""
         name = self.unique_name(primitive)
-        transform = Transform(tuple(position))  # type: ignore[arg-type]
+        transform = Transform(tuple(position))
         return self._append(f"add {name}", [EntityRecord(name, (transform, Mesh(primitive, MESH_COLOR)))])
 
     def add_mesh_file(self, path: str | Path, position: Sequence[float] = (0.0, 0.0, 0.0)) -> int | None:
@@ -95,7 +95,7 @@ class AddingMixin:
             asset = self._unique_asset(re.sub(r"\W+", "_", file.stem) or "mesh")
             extra.append(AssetOp(asset, None, spec))
         name = self.unique_name(asset)
-        record = EntityRecord(name, (Transform(tuple(position)), Mesh(asset, MESH_COLOR)))  # type: ignore[arg-type]
+        record = EntityRecord(name, (Transform(tuple(position)), Mesh(asset, MESH_COLOR)))
         return self._append(f"import {file.name}", [record], extra)
 
     def _unique_asset(self, base: str) -> str:
@@ -110,7 +110,7 @@ class AddingMixin:
         """A 2-unit box that compresses space along x (D = (1, 0, 0)): visible at once, easy to tune."""
         name = self.unique_name("aberration")
         color = ABERRATION_COLORS[self._count(Aberration) % len(ABERRATION_COLORS)]
-        transform = Transform(tuple(position), scale=(2.0, 2.0, 2.0))  # type: ignore[arg-type]
+        transform = Transform(tuple(position), scale=(2.0, 2.0, 2.0))
         aberration = Aberration((1.0, 0.0, 0.0), color=color)
         return self._append(f"add {name}", [EntityRecord(name, (transform, aberration))])
 

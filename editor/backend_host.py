@@ -19,6 +19,7 @@ import numpy as np
 from backends.base import BACKENDS, Backend, Frame, backend_class, create_backend, probe
 from backends.upload import SceneUploader
 from engine.camera_view import CameraView
+from engine.layout import Precision
 from engine.scene import Scene
 
 if TYPE_CHECKING:
@@ -57,14 +58,14 @@ class BackendHost:
         return self._reasons
 
     @staticmethod
-    def precisions(name: str) -> tuple[str, ...]:
+    def precisions(name: str) -> tuple[Precision, ...]:
         try:
             return tuple(backend_class(name).precisions)
         except Exception:  # an unimportable backend: the panel shows its probe reason instead
             return ("f32",)
 
     @property
-    def precision(self) -> str | None:
+    def precision(self) -> Precision | None:
         return None if self.backend is None else self.backend.precision
 
     @property
@@ -76,7 +77,7 @@ class BackendHost:
     def _draws_in_place(self) -> bool:
         return self.backend is not None and self.ctx is not None and getattr(self.backend, "context", None) is self.ctx
 
-    def select(self, name: str, precision: str | None = None) -> bool:
+    def select(self, name: str, precision: Precision | None = None) -> bool:
         """Start backend ``name`` (GLSL draws in the editor's own context); on failure keep the reason."""
         self.release()
         self.name = name
@@ -84,9 +85,9 @@ class BackendHost:
             if name == "glsl" and self.ctx is not None:
                 from backends.glsl.backend import GlslBackend
 
-                self.backend = GlslBackend(precision, context=self.ctx)  # type: ignore[arg-type]
+                self.backend = GlslBackend(precision, context=self.ctx)
             else:
-                self.backend = create_backend(name, precision=precision, fallback=False)  # type: ignore[arg-type]
+                self.backend = create_backend(name, precision=precision, fallback=False)
         except Exception as e:  # whatever a backend raises while starting, the editor must go on
             self.backend = None
             self.error = f"the {name} backend cannot start: {e}"

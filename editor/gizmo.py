@@ -50,13 +50,13 @@ def matrix_to_transform(matrix: np.ndarray, old: Transform, operation: str) -> T
     """The Transform a gizmo ``operation`` produced, changing only what that operation edits."""
     m = np.asarray(matrix, dtype=np.float64)
     if operation == "translate":
-        return Transform(_keep_unmoved(m[:3, 3], old.position), old.rotation, old.scale)  # type: ignore[arg-type]
+        return Transform(_keep_unmoved(m[:3, 3], old.position), old.rotation, old.scale)
     columns = m[:3, :3]
     lengths = np.linalg.norm(columns, axis=0)
     signs = np.sign(np.asarray(old.scale, dtype=np.float64))
     if operation == "scale":
         scale = _keep_unmoved(np.maximum(lengths, 1e-6) * signs, old.scale)
-        return Transform(old.position, old.rotation, scale)  # type: ignore[arg-type]
+        return Transform(old.position, old.rotation, scale)
     if operation != "rotate":
         raise ValueError(f"unknown gizmo operation {operation!r}")
     rotation = columns / (np.maximum(lengths, 1e-12) * signs)
@@ -65,4 +65,4 @@ def matrix_to_transform(matrix: np.ndarray, old: Transform, operation: str) -> T
         q = -q
     if np.allclose(q, old.rotation, atol=1e-6):
         return old
-    return Transform(old.position, tuple(float(c) for c in q / np.linalg.norm(q)), old.scale)  # type: ignore[arg-type]
+    return Transform(old.position, tuple(float(c) for c in q / np.linalg.norm(q)), old.scale)

@@ -28,7 +28,7 @@ class HeadlessImgui:
         self.plot = implot.create_context()
         implot.set_current_context(self.plot)
         io = imgui.get_io()
-        io.display_size = size
+        io.display_size = imgui.ImVec2(*size)
         io.set_ini_filename(None)
         io.config_flags |= imgui.ConfigFlags_.docking_enable.value
         io.backend_flags |= imgui.BackendFlags_.renderer_has_textures.value

@@ -181,7 +181,7 @@ class EditorModel(DocumentsMixin, AddingMixin):
 
     def edit(self, entity: int, kind: type, *, merge_key: object | None = None, **changes: Any) -> str | None:
         """Change fields of a component; returns ``None`` or the validation error (nothing is changed then)."""
-        current = self.scene.get(entity, kind)
+        current: Any = self.scene.get(entity, kind)  # whichever component dataclass ``kind`` names
         try:
             updated = dataclasses.replace(current, **changes)
         except ValidationError as e:

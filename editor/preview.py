@@ -93,7 +93,7 @@ def preview_lines(
     for entity, (transform, portal) in scene.query(Transform, Portal):
         if portal.debug_draw and entity != selected:
             dim = 1.0 if portal.target is not None else INERT_DIM
-            add(quad_edges(transform), tuple(c * dim for c in portal.color))  # type: ignore[arg-type]
+            add(quad_edges(transform), tuple(c * dim for c in portal.color))
     camera = scene.camera_entity
     if show_camera and camera is not None and camera != selected:
         add(camera_edges(scene.get(camera, Transform), scene.get(camera, Camera)), CAMERA_COLOR)
@@ -204,6 +204,24 @@ void main() { f_color = vec4(v_color, u_alpha); }
 """
 
 
+def _uniform(program: moderngl.Program, name: str) -> moderngl.Uniform:
+    """A uniform of ``program`` (``program[name]`` may also name a block, an attribute or a varying)."""
+    import moderngl
+
+    member = program[name]
+    assert isinstance(member, moderngl.Uniform)
+    return member
+
+
+def _color_texture(fbo: moderngl.Framebuffer) -> moderngl.Texture:
+    """The colour attachment of a preview framebuffer: always a texture (imgui draws it), never a renderbuffer."""
+    import moderngl
+
+    color = fbo.color_attachments[0]
+    assert isinstance(color, moderngl.Texture)
+    return color
+
+
 class PreviewRenderer:
     """Draws the preview pass into its own framebuffer; :meth:`render` returns the colour texture."""
 
@@ -231,7 +249,7 @@ class PreviewRenderer:
     @property
     def texture(self) -> moderngl.Texture | None:
         """The last preview (GL convention: texel row 0 is the image's bottom row)."""
-        return None if self._fbo is None else self._fbo.color_attachments[0]  # type: ignore[return-value]
+        return None if self._fbo is None else _color_texture(self._fbo)
 
     def _mesh(self, scene: Scene, asset_name: str) -> tuple[moderngl.VertexArray, int] | None:
         try:
@@ -273,8 +291,8 @@ class PreviewRenderer:
         world_to_view = view_matrix(view)
         ctx.polygon_offset = (1.0, 1.0)
         light = np.asarray(scene.settings.light_dir, dtype=np.float64)
-        self.mesh_program["u_light"].value = tuple(light / np.linalg.norm(light))
-        self.mesh_program["u_ambient"].value = float(scene.settings.ambient)
+        _uniform(self.mesh_program, "u_light").value = tuple(light / np.linalg.norm(light))
+        _uniform(self.mesh_program, "u_ambient").value = float(scene.settings.ambient)
         for _, (transform, mesh) in scene.query(Transform, Mesh):
             drawn = self._mesh(scene, mesh.asset)
             if drawn is None:
@@ -282,9 +300,9 @@ class PreviewRenderer:
             model = trs_matrix(transform.position, transform.rotation, transform.scale)
             mvp = proj @ (world_to_view @ model)
             normal = np.linalg.inv(model[:3, :3]).T
-            self.mesh_program["u_mvp"].write(mvp.T.astype("f4").tobytes())
-            self.mesh_program["u_normal"].write(normal.T.astype("f4").tobytes())
-            self.mesh_program["u_color"].value = tuple(mesh.color)
+            _uniform(self.mesh_program, "u_mvp").write(mvp.T.astype("f4").tobytes())
+            _uniform(self.mesh_program, "u_normal").write(normal.T.astype("f4").tobytes())
+            _uniform(self.mesh_program, "u_color").value = tuple(mesh.color)
             drawn[0].render(moderngl.TRIANGLES, vertices=drawn[1])
         ctx.polygon_offset = (0.0, 0.0)
         fbo.color_mask = (True,) * 4
@@ -300,14 +318,20 @@ class PreviewRenderer:
                 ctx.depth_func = ">"
                 if shaded:  # mix into the opaque raster image; over a traced frame imgui does the mixing
                     ctx.enable(moderngl.BLEND)
-                    ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE)
+                    # moderngl's stub allows only the 2-value form; its docs and C code take 4 (colour, alpha).
+                    ctx.blend_func = (  # type: ignore[assignment]
+                        moderngl.SRC_ALPHA,
+                        moderngl.ONE_MINUS_SRC_ALPHA,
+                        moderngl.ONE,
+                        moderngl.ONE,
+                    )
                 self._draw_lines(thick_lines(edges, np.tile(SELECTION_COLOR, (len(edges), 1)), view_proj, size), 0.3)
                 ctx.disable(moderngl.BLEND)
                 ctx.depth_func = "<"
         fbo.depth_mask = True
         fbo.use()
         ctx.disable(moderngl.DEPTH_TEST)
-        return fbo.color_attachments[0]  # type: ignore[return-value]
+        return _color_texture(fbo)
 
     def _draw_lines(self, vertices: np.ndarray, alpha: float) -> None:
         import moderngl
@@ -320,7 +344,7 @@ class PreviewRenderer:
                 self._line_buffer.release()
             self._line_buffer = ctx.buffer(reserve=max(vertices.nbytes, 4096) * 2)
         self._line_buffer.write(vertices.tobytes())
-        self.line_program["u_alpha"].value = alpha
+        _uniform(self.line_program, "u_alpha").value = alpha
         vao = ctx.vertex_array(self.line_program, [(self._line_buffer, "4f 3f", "in_clip", "in_color")])
         vao.render(moderngl.TRIANGLES, vertices=len(vertices))
         vao.release()

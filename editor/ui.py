@@ -9,6 +9,7 @@ headless tests drive the very same code with simulated input.
 from __future__ import annotations
 
 import traceback
+from pathlib import Path
 
 import numpy as np
 from imgui_bundle import imgui, imguizmo
@@ -93,24 +94,24 @@ class EditorUi:
 
     # --- dialogs ------------------------------------------------------------------------------
 
-    def _folder(self) -> object:
+    def _folder(self) -> Path | None:
         return self.model.path.resolve().parent if self.model.path is not None else None
 
     def show_open_dialog(self) -> None:
-        self.files.show("open", self._folder(), "", self._open_chosen)  # type: ignore[arg-type]
+        self.files.show("open", self._folder(), "", self._open_chosen)
 
-    def _open_chosen(self, path: object) -> bool:
+    def _open_chosen(self, path: Path) -> bool:
         self.model.request("open", str(path))
         return True
 
     def show_save_dialog(self) -> None:
         name = self.model.path.name if self.model.path is not None else f"{self.model.scene.name}.json"
-        self.files.show("save", self._folder(), name, self.model.save_as)  # type: ignore[arg-type]
+        self.files.show("save", self._folder(), name, self.model.save_as)
 
     def show_import_dialog(self) -> None:
-        self.files.show("import", self._folder(), "", self._import_chosen)  # type: ignore[arg-type]
+        self.files.show("import", self._folder(), "", self._import_chosen)
 
-    def _import_chosen(self, path: object) -> bool:
+    def _import_chosen(self, path: Path) -> bool:
         return self.model.add_mesh_file(str(path), self.spawn_point()) is not None
 
     def request_quit(self) -> None:

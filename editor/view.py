@@ -85,7 +85,7 @@ class EditorView:
     def transform(self) -> Transform:
         """This view as a camera Transform ("Camera to view")."""
         q = quat_from_matrix(self.rotation)
-        return Transform(tuple(float(c) for c in self.position), tuple(float(c) for c in q))  # type: ignore[arg-type]
+        return Transform(tuple(float(c) for c in self.position), tuple(float(c) for c in q))
 
     def look(self, dx_deg: float, dy_deg: float) -> None:
         """Turn right by ``dx_deg`` and up by ``dy_deg`` (pitch kept off the poles)."""

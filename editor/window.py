@@ -29,7 +29,12 @@ from editor.ui import EditorUi
 from engine.errors import AberrantError
 
 if TYPE_CHECKING:
+    import glfw
+
     from engine.scene import Scene
+
+    #: A glfw window handle (the stub names its pointer type only privately).
+    Window = glfw._GLFWwindowPointerT
 
 #: Backends the editor tries, in order, when none is named (GLSL first: it draws without a read-back).
 PREFERRED_BACKENDS = ("glsl", "opencl", "reference")
@@ -83,6 +88,7 @@ class EditorWindow:
         self._load_font()
         imgui.style_colors_dark()
         address = ctypes.cast(self.window, ctypes.c_void_p).value
+        assert address is not None  # a window glfw created is never the null pointer
         imgui.backends.glfw_init_for_opengl(address, True)
         imgui.backends.opengl3_init("#version 330")
         glfw.set_window_close_callback(self.window, self._on_close)
@@ -100,7 +106,7 @@ class EditorWindow:
         self.last_frame_ms = 0.0
         self._last = time.perf_counter()
 
-    def _create_window(self, size: tuple[int, int]) -> object:
+    def _create_window(self, size: tuple[int, int]) -> Window:
         glfw = self.glfw
         for major, minor in ((4, 3), (3, 3)):  # 4.3 for the GLSL tracer's compute shaders; 3.3 runs the rest
             glfw.default_window_hints()
@@ -123,7 +129,7 @@ class EditorWindow:
 
     # --- glfw callbacks ----------------------------------------------------------------------
 
-    def _on_close(self, window: object) -> None:
+    def _on_close(self, window: Window) -> None:
         """The window's close button: with unsaved changes, ask first."""
         if self.model.dirty and not self.model.quit_requested:
             self.glfw.set_window_should_close(window, False)

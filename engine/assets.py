@@ -15,10 +15,14 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from engine.errors import AberrantError
+
+if TYPE_CHECKING:
+    import trimesh
 
 MESH_SUFFIXES = (".obj", ".glb", ".gltf", ".ply", ".stl", ".off")
 PRIMITIVES = ("box", "plane", "quad", "sphere", "pyramid", "cylinder")
@@ -98,7 +102,9 @@ def make_asset(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, 
 
 def _box() -> MeshAsset:
     """The unit cube [-1/2, 1/2]^3 with a UV square per face (24 vertices, outward winding)."""
-    verts, uvs, faces = [], [], []
+    verts: list[list[float]] = []
+    uvs: list[list[float]] = []
+    faces: list[list[int]] = []
     for axis in range(3):
         for sign in (1.0, -1.0):
             u_axis, v_axis = (axis + 1) % 3, (axis + 2) % 3
@@ -260,7 +266,7 @@ def _quiet_trimesh() -> Iterator[None]:
         logger.propagate = propagate
 
 
-def _resolver(path: Path) -> object:
+def _resolver(path: Path) -> trimesh.resolvers.FilePathResolver:
     import trimesh
 
     return trimesh.resolvers.FilePathResolver(str(path))

@@ -15,6 +15,7 @@ import secrets
 import time
 from collections.abc import Mapping
 from pathlib import Path
+from typing import TypeVar
 
 #: A temporary older than this is stale even if a process with its PID exists (the PID was reused).
 STALE_TEMP_SECONDS = 3600.0
@@ -71,7 +72,11 @@ def clean_stale_temps(path: Path) -> list[Path]:
     return removed
 
 
-def write_atomically(outputs: Mapping[str | os.PathLike[str], bytes]) -> None:
+#: A target path: callers hand over mappings keyed by ``Path`` or by ``str`` (Mapping keys are invariant).
+PathT = TypeVar("PathT", bound=str | os.PathLike[str])
+
+
+def write_atomically(outputs: Mapping[PathT, bytes]) -> None:
     """Write each file via a temporary sibling, fsync, then rename over the target.
 
     All temporaries are written before any rename, so an error while writing

@@ -196,8 +196,8 @@ def _plan_level(
     key = (b * (k * 3) + (local[:, None] * 3 + np.arange(3))).ravel()  # element-major, axis-minor
     nkeys = bins * k * 3
     cnt = np.bincount(key, minlength=nkeys).reshape(bins, k, 3)
-    blo = np.full((3, nkeys), np.inf, np.float32)
-    bhi = np.full((3, nkeys), -np.inf, np.float32)
+    blo: np.ndarray = np.full((3, nkeys), np.inf, np.float32)
+    bhi: np.ndarray = np.full((3, nkeys), -np.inf, np.float32)
     for j in range(3):  # 1-D ufunc.at is fast; one call per box component
         np.minimum.at(blo[j], key, np.repeat(lo[:, j], 3))
         np.maximum.at(bhi[j], key, np.repeat(hi[:, j], 3))

@@ -76,9 +76,11 @@ def make_transform(
         q = tuple(rotation)
     else:
         q = (0.0, 0.0, 0.0, 1.0)
-    if isinstance(scale, int | float) and not isinstance(scale, bool):
+    if isinstance(scale, bool):  # an int to the type system, but no scale
+        raise ValidationError("scale", f"expected a number or 3 numbers, got {scale!r}")
+    if isinstance(scale, int | float):
         scale = (float(scale),) * 3
-    return Transform(tuple(position), q, tuple(scale))  # type: ignore[arg-type]
+    return Transform(tuple(position), q, tuple(scale))
 
 
 class Scene:

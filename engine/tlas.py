@@ -83,8 +83,8 @@ def _sah_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
     # among the others' centres on every axis would otherwise stay in a subtree with small boxes).
     big = int(np.argmax(_half_area(lo, hi)))
     rest = np.delete(np.arange(n), big)
-    cost = float(_half_area(lo[big], hi[big]) + _half_area(lo[rest].min(axis=0), hi[rest].max(axis=0)) * (n - 1))
-    if cost < best_cost:
+    alone = float(_half_area(lo[big], hi[big]) + _half_area(lo[rest].min(axis=0), hi[rest].max(axis=0)) * (n - 1))
+    if alone < best_cost:
         best_order, best_k = np.concatenate([[big], rest]), 1
     return best_order, best_k
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from components import Aberration, Camera, Transform
 from engine.input import InputSource, InputState
-from engine.maths import quat_from_axis_angle, quat_multiply, quat_normalize, quat_to_matrix, trs_inverse
+from engine.maths import ArrayLike, quat_from_axis_angle, quat_multiply, quat_normalize, quat_to_matrix, trs_inverse
 from engine.scene import Scene
 from systems.state import MotionRecord
 
@@ -179,7 +179,7 @@ def apply_look(rotation: Sequence[float], yaw_deg: float, pitch_deg: float) -> n
     return quat_normalize(q)
 
 
-def perceived_velocity(rotation: Sequence[float], move: Sequence[float], speed: float, multiplier: float) -> np.ndarray:
+def perceived_velocity(rotation: ArrayLike, move: Sequence[float], speed: float, multiplier: float) -> np.ndarray:
     """``speed × multiplier × R_cam · normalize(move)`` (zero when there is no move input)."""
     m = np.asarray(move, dtype=np.float64)
     n = float(np.linalg.norm(m))
@@ -227,8 +227,8 @@ class CameraMovementProcessor(esper.Processor):
         self.scene.set(
             entity,
             Transform(
-                tuple(float(c) for c in position),  # type: ignore[arg-type]
-                tuple(float(c) for c in rotation),  # type: ignore[arg-type]
+                tuple(float(c) for c in position),
+                tuple(float(c) for c in rotation),
                 transform.scale,
             ),
         )

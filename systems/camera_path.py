@@ -95,9 +95,9 @@ def yaw_pitch_quat(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     return quat_multiply(qy, quat_from_axis_angle((1.0, 0.0, 0.0), math.radians(pitch_deg)))
 
 
-def _vector(value: object, n: int, index: int, field: str) -> np.ndarray:
-    try:
-        items = [float(c) for c in value]  # type: ignore[union-attr]
+def _vector(value: Sequence[float], n: int, index: int, field: str) -> np.ndarray:
+    try:  # a Keyframe is built by callers: its fields may hold anything
+        items = [float(c) for c in value]
     except (TypeError, ValueError):
         raise CameraPathError(f"keyframe {index}, field {field!r}: expected {n} numbers, got {value!r}") from None
     if len(items) != n or not all(math.isfinite(c) for c in items):
@@ -126,7 +126,9 @@ class CameraPath:
         keyframes = list(keyframes)
         if len(keyframes) < 2:
             raise CameraPathError(f"a camera path needs at least 2 keyframes, got {len(keyframes)}")
-        times, positions, quats = [], [], []
+        times: list[float] = []
+        positions: list[np.ndarray] = []
+        quats: list[np.ndarray] = []
         for i, key in enumerate(keyframes):
             if not isinstance(key, Keyframe):
                 raise CameraPathError(f"keyframe {i}: expected a Keyframe, got {type(key).__name__}")
@@ -152,6 +154,7 @@ class CameraPath:
                     )
                 q = quat_normalize_safe(q)
             else:
+                assert key.look_at is not None  # exactly one of rotation and look_at, checked above
                 target = _vector(key.look_at, 3, i, "look_at")
                 if float(np.linalg.norm(target - position)) < 1e-12:
                     raise CameraPathError(f"keyframe {i}, field 'look_at': the point looked at equals the position")
@@ -222,7 +225,7 @@ class CameraPath:
         position, yaw, pitch = self.control_pose(self.start)
         old = scene.get(scene.camera_entity, Transform)
         rotation = tuple(float(c) for c in yaw_pitch_quat(yaw, pitch))
-        scene.set(scene.camera_entity, Transform(tuple(float(c) for c in position), rotation, old.scale))  # type: ignore[arg-type]
+        scene.set(scene.camera_entity, Transform(tuple(float(c) for c in position), rotation, old.scale))
 
     def inputs(self, scene: Scene, *, rate: float = 1.0) -> PathInput:
         """An input source that walks this path through the real systems (``rate``: path seconds per second)."""
@@ -261,8 +264,5 @@ class PathInput:
         move = quat_to_matrix(yaw_pitch_quat(yaw1, pitch1)).T @ (p1 - p0)
         step = float(np.linalg.norm(move))
         move = move / step if step > 1e-12 else np.zeros(3)
-        return InputState(
-            tuple(float(c) for c in move),  # type: ignore[arg-type]
-            (d_yaw, pitch1 - pitch0),
-            speed=step / dt,
-        )
+        x, y, z = (float(c) for c in move)
+        return InputState((x, y, z), (d_yaw, pitch1 - pitch0), speed=step / dt)

@@ -177,8 +177,8 @@ class PortalTeleportProcessor(esper.Processor):
         self.scene.set(
             entity,
             Transform(
-                tuple(float(c) for c in result.position),  # type: ignore[arg-type]
-                tuple(float(c) for c in rotation),  # type: ignore[arg-type]
+                tuple(float(c) for c in result.position),
+                tuple(float(c) for c in rotation),
                 transform.scale,
             ),
         )

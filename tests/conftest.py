@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from backends.base import backend_class, probe
+from backends.base import Backend, backend_class, probe
+from engine.layout import Precision
 from engine.scene import Scene
 
 os.environ.setdefault("ABERRANT_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "aberrant"))
@@ -30,7 +31,7 @@ def require_backend(name: str) -> None:
     pytest.skip(f"{name} backend cannot run here: {reason}")
 
 
-_live: dict[tuple[str, str], object] = {}
+_live: dict[tuple[str, str], Backend] = {}
 
 
 @pytest.fixture
@@ -46,7 +47,7 @@ def scenes() -> Iterator[list[Scene]]:
 def backend_factory():
     """``make(name, precision=None)``: one live backend per (name, precision) for the whole session."""
 
-    def make(name: str, precision: str | None = None):
+    def make(name: str, precision: Precision | None = None):
         require_backend(name)
         key = (name, precision or "")
         if key not in _live:
@@ -55,5 +56,5 @@ def backend_factory():
 
     yield make
     for backend in _live.values():
-        backend.release()  # type: ignore[attr-defined]
+        backend.release()
     _live.clear()

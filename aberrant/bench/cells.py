@@ -132,7 +132,7 @@ class CellRunner:
         width, height = size
         row["bvh_build_ms"] = self.bvh_build_ms(scene, setting.leaf)
         start = time.perf_counter()
-        backend: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
+        backend: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)
         row["init_ms"] = _ms(start)
         try:
             uploader = SceneUploader(backend, bvh_params=BvhParams(max_leaf_size=setting.leaf))
@@ -161,13 +161,13 @@ class CellRunner:
             row["frame"] = timing.as_dict()
             row["mrays_per_s"] = timing.mrays_per_s(width * height)
 
-            def frame() -> object:
+            def timed_frame() -> object:
                 return backend.render(camera, width, height, TIMED_AOVS)
 
             if pair is not None:
-                row["embree_paired"] = self._paired(pair, frame)
+                row["embree_paired"] = self._paired(pair, timed_frame)
             if baseline is not None:
-                row["baseline_paired"] = self._baseline(setting, baseline, size, frame)
+                row["baseline_paired"] = self._baseline(setting, baseline, size, timed_frame)
             self._ticks(scene, camera, uploader, row)
         finally:
             backend.release()
@@ -195,7 +195,7 @@ class CellRunner:
         self, setting: Setting, baseline: Scene, size: tuple[int, int], frame: Callable[[], object]
     ) -> dict[str, float]:
         """The plain scene on a second backend of the same setting, its frames alternating with this scene's."""
-        other: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)  # type: ignore[arg-type]
+        other: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)
         try:
             camera = scene_camera(baseline)
             SceneUploader(other, bvh_params=BvhParams(max_leaf_size=setting.leaf)).sync(baseline, camera.position)

@@ -123,7 +123,8 @@ def _worker(conn: Any) -> None:
             conn.send(None)
         elif kind == "trace":
             start = time.perf_counter()
-            scene.run(origins, directions, output=1)  # type: ignore[union-attr]
+            assert scene is not None  # the parent sends "scene" and "rays" before any "trace"
+            scene.run(origins, directions, output=1)
             conn.send((time.perf_counter() - start) * 1e3)
 
 

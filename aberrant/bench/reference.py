@@ -114,7 +114,8 @@ def _save(path: Path, frame: ReferenceFrame) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             meta = json.dumps({"format": CACHE_FORMAT, "key": frame.key, "render_ms": frame.render_ms})
-            np.savez_compressed(fh, meta=np.array(meta), **frame.aovs)
+            # mypy cannot tell that the unpacked AOV names never include savez's allow_pickle keyword.
+            np.savez_compressed(fh, meta=np.array(meta), **frame.aovs)  # type: ignore[arg-type]
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -94,18 +94,23 @@ def _targets(results: dict[str, Any]) -> list[str]:
         for family in families:
             plain, deformed = base.get((PLAIN_SCENE, family)), base.get((scene, family))
             label = f"{family}: {kind} over the view / plain frame time"
+            plain_ok = plain is not None and plain["status"] == "ok"
             if deformed is None or (plain is None and not deformed.get("baseline_paired")):
                 rows.append([label, "not run", f"<= {goal}x", _mark(None)])
-            elif deformed["status"] != "ok" or not (deformed.get("baseline_paired") or plain["status"] == "ok"):
-                why = deformed["status"] if deformed["status"] != "ok" else plain["status"]
+            elif deformed["status"] != "ok" or not (deformed.get("baseline_paired") or plain_ok):
+                why = deformed["status"] if deformed["status"] != "ok" or plain is None else plain["status"]
                 rows.append([label, why, f"<= {goal}x", _mark(None)])
             else:
                 paired = deformed.get("baseline_paired")
-                plain_ok = plain is not None and plain["status"] == "ok"
-                medians = deformed["frame"]["median_ms"] / plain["frame"]["median_ms"] if plain_ok else None
-                ratio = paired["inverse"] if paired else medians
+                medians = (
+                    deformed["frame"]["median_ms"] / plain["frame"]["median_ms"]
+                    if plain is not None and plain_ok
+                    else None
+                )
+                slower = paired["inverse"] if paired else medians
+                assert slower is not None  # this branch has a paired run or an ok plain one
                 how = "paired" + (f"; {_ratio(medians)} from the medians" if medians else "") if paired else "medians"
-                rows.append([label, f"{_ratio(ratio)} ({how})", f"<= {goal}x", _mark(ratio <= goal)])
+                rows.append([label, f"{_ratio(slower)} ({how})", f"<= {goal}x", _mark(slower <= goal)])
     for entry in results.get("overhead", []):
         label = f"engine tick without render ({entry['backend']}, 1,000 entities, one moving)"
         if "median_ms" not in entry:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from engine.errors import AberrantError
+from engine.layout import Precision
 
 #: Every sweep, with what it varies (the report lists these).
 SWEEPS: dict[str, str] = {
@@ -49,7 +50,7 @@ class Setting:
     """One point of a sweep: a backend configured one way (``sweep`` names the knob varied, '' for the base)."""
 
     backend: str
-    precision: str = "f32"
+    precision: Precision = "f32"
     options: tuple[tuple[str, Any], ...] = ()  # backend constructor keywords
     leaf: int = BASE_LEAF
     max_events: int | None = None  # None: the scene's own
@@ -106,7 +107,7 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def settings_for(backend: str, precisions: Sequence[str], sweeps: Sequence[str], quick: bool) -> list[Setting]:
+def settings_for(backend: str, precisions: Sequence[Precision], sweeps: Sequence[str], quick: bool) -> list[Setting]:
     """The base setting of ``backend``, its other precisions, then each applicable sweep's other points."""
     allowed = BACKEND_SWEEPS.get(backend, ())
     base_precision = precisions[0]

@@ -101,7 +101,7 @@ class _Pose:
         def clean(values: np.ndarray) -> tuple[float, ...]:
             return tuple(float(c) + 0.0 for c in values)  # + 0.0 turns -0.0 into 0.0
 
-        return Transform(clean(position), clean(q), clean(self.s))  # type: ignore[arg-type]
+        return Transform(clean(position), clean(q), clean(self.s))
 
 
 @dataclass
@@ -150,10 +150,8 @@ class _Importer:
             where = f"game_objects[{index}]"
             if not isinstance(item, dict):
                 raise self.fail("expected an object", field=where)
-            uuid, parent = item.get("uuid"), item.get("parent", 0)
-            for key, value in (("uuid", uuid), ("parent", parent)):
-                if isinstance(value, bool) or not isinstance(value, int):
-                    raise self.fail(f"expected an integer uuid, got {value!r}", field=f"{where}.{key}")
+            uuid = self.uuid_field(item.get("uuid"), f"{where}.uuid")
+            parent = self.uuid_field(item.get("parent", 0), f"{where}.parent")
             name = item.get("name")
             name = name.strip() if isinstance(name, str) and name.strip() else f"object_{uuid}"
             obj = _Object(uuid, parent, name, [])
@@ -174,6 +172,11 @@ class _Importer:
             self.objects[uuid] = obj
             order.append(obj)
         return order
+
+    def uuid_field(self, value: object, field: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.fail(f"expected an integer uuid, got {value!r}", field=field)
+        return value
 
     def number(self, obj: _Object, comp: tuple[int, dict[str, Any]], key: str, default: float | None = None) -> float:
         i, fields = comp
@@ -322,7 +325,8 @@ class _Importer:
             color = (0.8, 0.8, 0.8)
             material = obj.first(MATERIAL)
             if material is not None:
-                color = tuple(min(max(self.number(obj, material, k, 1.0), 0.0), 1.0) for k in ("ColR", "ColG", "ColB"))
+                r, g, b = (min(max(self.number(obj, material, k, 1.0), 0.0), 1.0) for k in ("ColR", "ColG", "ColB"))
+                color = (r, g, b)
             parts.append(Mesh(asset, color, self.checker, cull_backfaces=True))
         portal_comp = obj.first(PORTAL)
         if portal_comp is not None:
@@ -332,7 +336,8 @@ class _Importer:
         aberration_comp = obj.first(ABERRATION)
         if aberration_comp is not None:
             fields = aberration_comp[1]
-            deformation = tuple(self.number(obj, aberration_comp, f"deformation{k}", 0.0) for k in "XYZ")
+            dx, dy, dz = (self.number(obj, aberration_comp, f"deformation{k}", 0.0) for k in "XYZ")
+            deformation = (dx, dy, dz)
             debug = fields.get("debugDraw", True)
             aberration = Aberration(
                 deformation, "radial", "restore", debug_draw=debug if isinstance(debug, bool) else True
@@ -372,9 +377,9 @@ class _Importer:
                     f"links to {other.label}, which has no Portal component", obj, f"components[{i}].connectedGO"
                 )
             target = self.names[other.uuid]
-        color = tuple(min(max(self.number(obj, comp, f"debugDrawCol{k}", 1.0), 0.0), 1.0) for k in "RGB")
+        r, g, b = (min(max(self.number(obj, comp, f"debugDrawCol{k}", 1.0), 0.0), 1.0) for k in "RGB")
         debug = fields.get("debugDraw", True)
-        return Portal(target, color, debug if isinstance(debug, bool) else True)
+        return Portal(target, (r, g, b), debug if isinstance(debug, bool) else True)
 
     def add_camera(self, scene: Scene, camera_obj: _Object | None) -> None:
         if camera_obj is not None:

@@ -90,7 +90,24 @@ _SOURCES: tuple[tuple[str, str], ...] = (
 def _create_context() -> moderngl.Context:
     import moderngl
 
-    return moderngl.create_standalone_context(backend="egl", require=430)
+    # moderngl's stub types each of **settings as a dict; they are plain values (backend="egl").
+    return moderngl.create_standalone_context(backend="egl", require=430)  # type: ignore[arg-type]
+
+
+def _image_of(store: moderngl.Buffer | moderngl.Texture) -> moderngl.Texture:
+    """A table store known to be an image (``table_store == "image"``)."""
+    import moderngl
+
+    assert isinstance(store, moderngl.Texture)
+    return store
+
+
+def _buffer_of(store: moderngl.Buffer | moderngl.Texture) -> moderngl.Buffer:
+    """A table store known to be a storage buffer (``table_store == "ssbo"``)."""
+    import moderngl
+
+    assert isinstance(store, moderngl.Buffer)
+    return store
 
 
 def _write_texels(image: moderngl.Texture, first: int, texels: np.ndarray) -> None:
@@ -118,7 +135,7 @@ class GlslBackend(shared.UploadedScene, Backend):
 
     name: ClassVar[str] = "glsl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
-    camera_relative: ClassVar[bool] = True
+    camera_relative: bool = True
     #: Compact records: a visit loads 2 texels instead of 4 (llvmpipe gathers texels at a bounded rate).
     bvh_compact: ClassVar[bool] = True
 
@@ -301,10 +318,11 @@ class GlslBackend(shared.UploadedScene, Backend):
                     old.release()
                 old = self._tables[name] = self._image(texels)
             assert old is not None
-            width, rows = old.size
+            image = _image_of(old)
+            width, rows = image.size
             data = np.zeros((rows * width, 4), np.uint32)
             data[:texels] = table.view(np.uint32).reshape(-1, 4)
-            old.write(data)
+            image.write(data)
         elif same:
             assert old is not None
             old.write(table)
@@ -319,10 +337,10 @@ class GlslBackend(shared.UploadedScene, Backend):
         part = table[rows.start : rows.stop]
         target = self._tables[name]
         if self.table_store != "image":
-            target.write(part, offset=rows.start * table.dtype.itemsize)
+            _buffer_of(target).write(part, offset=rows.start * table.dtype.itemsize)
             return part.nbytes
         stride = table.dtype.itemsize // 16
-        _write_texels(target, rows.start * stride, part.view(np.uint32).reshape(-1, 4))
+        _write_texels(_image_of(target), rows.start * stride, part.view(np.uint32).reshape(-1, 4))
         return part.nbytes
 
     def read_table(self, name: str) -> bytes:
@@ -331,7 +349,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         if store is None:
             raise AberrantError(f"glsl backend: table {name!r} has not been uploaded")
         with self._current():
-            data = store.read(alignment=1) if self.table_store == "image" else store.read()
+            data = _image_of(store).read(alignment=1) if self.table_store == "image" else store.read()
         return data[: self._table_bytes[name]]
 
     # --- shaders ---------------------------------------------------------------------
@@ -411,15 +429,17 @@ class GlslBackend(shared.UploadedScene, Backend):
             program = self._program(self._defines(aovs))
             row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes, self._bounds)
             if self.table_store == "image":
-                _write_texels(self._camera, 0, row.view(np.uint32).reshape(-1, 4))
+                camera_image = _image_of(self._camera)
+                _write_texels(camera_image, 0, row.view(np.uint32).reshape(-1, 4))
                 for unit, name in enumerate(layout.TABLES, start=1):
-                    self._tables[name].bind_to_image(unit, read=True, write=False)
-                self._camera.bind_to_image(CAMERA_IMAGE, read=True, write=False)
+                    _image_of(self._tables[name]).bind_to_image(unit, read=True, write=False)
+                camera_image.bind_to_image(CAMERA_IMAGE, read=True, write=False)
             else:
-                self._camera.write(row)
+                camera_buffer = _buffer_of(self._camera)
+                camera_buffer.write(row)
                 for binding, name in enumerate(layout.TABLES):
-                    self._tables[name].bind_to_storage_buffer(binding)
-                self._camera.bind_to_storage_buffer(CAMERA_BINDING)
+                    _buffer_of(self._tables[name]).bind_to_storage_buffer(binding)
+                camera_buffer.bind_to_storage_buffer(CAMERA_BINDING)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:
                     self._outputs[name].bind_to_storage_buffer(OUTPUT_BINDINGS[name])

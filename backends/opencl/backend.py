@@ -214,7 +214,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
 
     name: ClassVar[str] = "opencl"
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
-    camera_relative: ClassVar[bool] = True
+    camera_relative: bool = True
     #: 8-wide nodes tested with float8 operations: PoCL runs each work-item as scalar code, so the
     #: vector width is what a CPU core's SIMD gets (one AVX2 register per bound component). Against
     #: 4-wide (PoCL 3.1, 800x800, CPU time per frame, interleaved): -3 % on the 10k torus, -4 % on the
@@ -237,8 +237,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         """
         super().__init__(precision)
         self.bvh_width = BVH_WIDTH_BY_PRECISION[self.precision]
-        cl = _import_cl()
-        self._cl = cl
+        self._cl = _import_cl()
         self._cache_dir = configure_caches()
         self.device: cl.Device = select_device(device, prefer_fp64=self.precision == "f64")
         self.fp64 = device_has_fp64(self.device)
@@ -248,16 +247,16 @@ class OpenClBackend(shared.UploadedScene, Backend):
                 f"{FP64_EXTENSION} (double precision); use precision f32 or another device (PYOPENCL_CTX)"
             )
         if local_size == "auto":
-            local_size = GPU_LOCAL_SIZE if self.device.type & cl.device_type.GPU else CPU_LOCAL_SIZE
+            local_size = GPU_LOCAL_SIZE if self.device.type & self._cl.device_type.GPU else CPU_LOCAL_SIZE
         self.local_size: tuple[int, int] | None = (
-            None if local_size is None else (int(local_size[0]), int(local_size[1]))  # type: ignore[index]
+            None if local_size is None else (int(local_size[0]), int(local_size[1]))
         )
-        self._ctx: cl.Context | None = cl.Context([self.device])
-        self._queue = cl.CommandQueue(self._ctx)
+        self._ctx: cl.Context | None = self._cl.Context([self.device])
+        self._queue = self._cl.CommandQueue(self._ctx)
         self._tables: dict[str, cl.Buffer] = {}
         self._forget_upload()
-        mf = cl.mem_flags
-        self._camera = cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
+        mf = self._cl.mem_flags
+        self._camera = self._cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
         self._camera_row: np.ndarray | None = None  # kept alive while its non-blocking copy runs
         self._outputs: dict[str, cl.Buffer] = {}
         self._size: tuple[int, int] = (0, 0)
@@ -404,7 +403,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
             self.compile_count += 1
         return kernel
 
-    def _bind(self, kernel: cl.Kernel, args: list[object]) -> None:
+    def _bind(self, kernel: cl.Kernel, args: list[cl.Buffer | None]) -> None:
         """Set the kernel arguments that differ from what it holds (each set costs a driver call)."""
         bound = self._bound.setdefault(id(kernel), [object()] * len(args))
         for index, (old, new) in enumerate(zip(bound, args, strict=True)):
@@ -430,14 +429,13 @@ class OpenClBackend(shared.UploadedScene, Backend):
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Launch one frame; reads back only the requested AOVs."""
         width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
-        cl = self._cl
         queue = self._queue
         start = time.perf_counter()
         kernel = self._kernel(self._defines())
         self._ensure_outputs(width, height, aovs)
         self._camera_row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes, self._bounds)
-        cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
-        args: list[object] = [self._tables[name] for name in layout.TABLES]
+        self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
+        args: list[cl.Buffer | None] = [self._tables[name] for name in layout.TABLES]
         args.append(self._camera)
         args += [self._outputs[name] if name in aovs else None for name in AOVS]
         self._bind(kernel, args)
@@ -446,14 +444,14 @@ class OpenClBackend(shared.UploadedScene, Backend):
         else:
             lx, ly = self.local_size
             global_size = (-(-width // lx) * lx, -(-height // ly) * ly)
-        cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
+        self._cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
         queue.finish()
         traced = time.perf_counter()
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = _OUTPUT_DTYPES[name]
             host = np.empty((height, width, *tail), dtype)
-            cl.enqueue_copy(queue, host, self._outputs[name], is_blocking=False)
+            self._cl.enqueue_copy(queue, host, self._outputs[name], is_blocking=False)
             setattr(frame, name, host)
         queue.finish()
         end = time.perf_counter()

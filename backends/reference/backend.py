@@ -29,7 +29,7 @@ class ReferenceBackend(Backend):
 
     name: ClassVar[str] = "reference"
     precisions: ClassVar[tuple[Precision, ...]] = ("f64",)
-    camera_relative: ClassVar[bool] = False
+    camera_relative: bool = False
 
     def __init__(self, precision: Precision | None = None) -> None:
         super().__init__(precision)

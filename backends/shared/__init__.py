@@ -15,7 +15,7 @@ macros a prelude must provide.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from importlib import resources
 
 import numpy as np
@@ -44,7 +44,7 @@ def read(name: str, package: str = __name__) -> str:
     return resources.files(package).joinpath(name).read_text(encoding="utf-8")
 
 
-def defines_block(defines: dict[str, int | float | str]) -> str:
+def defines_block(defines: Mapping[str, int | float | str]) -> str:
     """``#define NAME VALUE`` lines, in a stable order (a variant's source is its cache key)."""
     lines = []
     for name in sorted(defines):
@@ -61,7 +61,7 @@ def defines_block(defines: dict[str, int | float | str]) -> str:
 MIN_STACK = 32
 
 
-def assemble(header: str, defines: dict[str, int | float | str], files: Sequence[tuple[str, str]]) -> str:
+def assemble(header: str, defines: Mapping[str, int | float | str], files: Sequence[tuple[str, str]]) -> str:
     """One variant's full source: ``header`` + defines + each ``(package, file)`` in order, each marked."""
     parts = [header, defines_block(defines)]
     for package, name in files:

@@ -134,7 +134,9 @@ def main(out: Path = OUT) -> Path:
     )
     out.write_text(text)
     # Round trip: what was written must load as the same closed surface.
-    check(trimesh.load(out, force="mesh"))
+    loaded = trimesh.load(out, force="mesh")
+    assert isinstance(loaded, trimesh.Trimesh)
+    check(loaded)
     print(f"wrote {out} ({len(mesh.vertices)} vertices, {len(mesh.faces)} triangles)")
     return out
 

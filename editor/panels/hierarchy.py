@@ -15,7 +15,12 @@ CAMERA_SWATCH = (0.85, 0.85, 0.85)
 def swatch(model: EditorModel, entity: int) -> tuple[tuple[float, float, float], str]:
     """The colour and kind shown in front of an entity's name."""
     scene = model.scene
-    for kind, label in ((Aberration, "aberration"), (Portal, "portal"), (Mesh, "mesh")):
+    kinds: tuple[tuple[type[Aberration | Portal | Mesh], str], ...] = (
+        (Aberration, "aberration"),
+        (Portal, "portal"),
+        (Mesh, "mesh"),
+    )
+    for kind, label in kinds:
         component = scene.try_get(entity, kind)
         if component is not None:
             return component.color, label

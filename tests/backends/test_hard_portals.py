@@ -208,7 +208,7 @@ def test_moving_exactly_along_the_plane_never_teleports(scenes, euler, move):
     scenes.append(scene)
     q = quat_from_euler_deg(euler)
     door = scene.entity("door_a")
-    scene.set(door, Transform(DOOR_A["position"], tuple(q), DOOR_A["scale"]))  # type: ignore[arg-type]
+    scene.set(door, Transform(DOOR_A["position"], tuple(q), DOOR_A["scale"]))
     axes = quat_to_matrix(q)
     direction = axes @ np.array(move)
     start = np.array(DOOR_A["position"]) - 5.0 * direction

@@ -328,7 +328,8 @@ def test_render_uses_the_camera_sigma_bounds(scenes):
 def _walked_to_wall(scene: Scene, dt: float = 0.05) -> float:
     """Perceived distance the movement system walks forward at unit speed until it reaches the wall plane."""
     boxes = speed_boxes(scene)
-    camera = scene.get(scene.camera_entity, Transform)  # type: ignore[arg-type]
+    assert scene.camera_entity is not None
+    camera = scene.get(scene.camera_entity, Transform)
     position = np.array(camera.position, dtype=np.float64)
     v = quat_to_matrix(camera.rotation) @ np.array([0.0, 0.0, -1.0])
     elapsed = 0.0
@@ -380,7 +381,9 @@ def test_what_you_see_is_where_you_go_through_the_app(scenes):
     assert seen == pytest.approx(3.0 + 8.0 + 3.5)
     dt, ticks = 0.02, 0
     with App(scene, input_source=ScriptedInput(lambda _: InputState(move=(0.0, 0.0, -1.0)))) as app:
-        while scene.get(scene.camera_entity, Transform).position[2] > WALL_Z:  # type: ignore[arg-type]
+        camera = scene.camera_entity
+        assert camera is not None
+        while scene.get(camera, Transform).position[2] > WALL_Z:
             app.tick(dt)
             ticks += 1
     assert ticks * dt == pytest.approx(seen, rel=0.01)

@@ -190,7 +190,7 @@ BAD_SIZES = [
 def test_a_bad_size_is_one_clear_error_before_any_backend_opens(
     size: object, said: str, recording: list[RecordingReference], scene
 ) -> None:
-    with pytest.raises(AberrantError, match="^size must be") as caught:
+    with pytest.raises(AberrantError, match=r"^size must be") as caught:
         aberrant.render(scene, size=size)  # type: ignore[arg-type]
     assert str(caught.value).endswith(said) and "\n" not in str(caught.value)
     assert recording == []

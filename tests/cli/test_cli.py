@@ -8,6 +8,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -34,8 +35,8 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
     return code, captured.out, captured.err
 
 
-def scene_doc(**extra: object) -> dict[str, object]:
-    doc: dict[str, object] = {
+def scene_doc(**extra: object) -> dict[str, Any]:
+    doc: dict[str, Any] = {
         "format": "aberrant-scene",
         "version": 1,
         "camera": {"position": [0, 1, 4], "look_at": [0, 0.5, 0]},
@@ -87,7 +88,7 @@ def test_render_a_scene_file(tmp_path, capsys):
     (tmp_path / "meshes").mkdir()
     shutil.copy(KNOT, tmp_path / "meshes" / "knot.obj")
     doc = scene_doc(assets={"knot": {"path": "meshes/knot.obj"}})
-    doc["entities"].append({"name": "knot", "mesh": {"asset": "knot"}, "transform": {"position": [0, 0.5, 0]}})  # type: ignore[attr-defined]
+    doc["entities"].append({"name": "knot", "mesh": {"asset": "knot"}, "transform": {"position": [0, 0.5, 0]}})
     path = write(tmp_path / "level.json", doc)
     out = tmp_path / "level.png"
     code, _, stderr = run(capsys, "render", str(path), "--backend", "reference", *SIZE, "--out", str(out))
@@ -134,7 +135,7 @@ def bad_scene(tmp_path: Path, kind: str) -> tuple[str, list[str]]:
         return str(path), ["level.json", "'squashed'", "'transform.scale[1]'"]
     if kind == "bad portal":
         doc = scene_doc()
-        doc["entities"].append({"name": "door", "portal": {"target": "floor"}})  # type: ignore[attr-defined]
+        doc["entities"].append({"name": "door", "portal": {"target": "floor"}})
         write(path, doc)
         return str(path), ["level.json", "'door'", "'portal.target'", "not a portal"]
     if kind == "missing file":

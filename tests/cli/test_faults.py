@@ -35,6 +35,8 @@ import backends.base
 import systems.app
 from aberrant.cli import main
 from backends.base import BACKENDS, Frame, backend_class, create_backend, probe
+from backends.glsl.backend import GlslBackend
+from backends.opencl.backend import OpenClBackend
 from backends.reference.backend import ReferenceBackend
 from demos import build_demo
 from editor.backend_host import BackendHost
@@ -234,7 +236,8 @@ def broken_kernel(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatc
     name = request.param
     require_backend(name)
     cls = backend_class(name)
-    original = cls.source  # type: ignore[attr-defined]
+    assert issubclass(cls, GlslBackend | OpenClBackend)  # the backends that assemble kernel source
+    original = cls.source
     monkeypatch.setattr(cls, "source", staticmethod(lambda defines: original(defines) + f"\n#error {INJECTED}\n"))
     return name
 

@@ -415,7 +415,7 @@ def invalid_documents(draw: st.DrawFn) -> tuple[bytes, tuple[str, ...]]:
     if kind == "bad_block":
         key, value, words = copy.deepcopy(draw(st.sampled_from(BAD_BLOCKS)))
         if key == "assets":  # beside the valid assets, which entities may use
-            doc["assets"].update(value)  # type: ignore[arg-type]
+            doc["assets"].update(value)
         else:
             doc[key] = value
         return text(doc), words

@@ -58,7 +58,9 @@ def _statue_dir(tmp_path: Path) -> Path:
 def test_level_as_code_example_builds(tmp_path: Path) -> None:
     namespace: dict[str, object] = {}
     exec(compile(_block("python", "def build()"), "README.md", "exec"), namespace)
-    scene = namespace["build"]()  # type: ignore[operator]
+    build = namespace["build"]
+    assert callable(build)
+    scene = build()
     assert isinstance(scene, Scene)
     scene.base_dir = _statue_dir(tmp_path)
     scene.validate()

@@ -76,7 +76,7 @@ def test_wrong_types_in_vectors(value, field):
 
 def test_transform_is_frozen():
     with pytest.raises(AttributeError):
-        Transform().position = (1.0, 1.0, 1.0)  # type: ignore[misc]
+        Transform().position = (1.0, 1.0, 1.0)  # type: ignore[misc]  # the assignment the types forbid, tried
 
 
 # --- Camera ------------------------------------------------------------------------

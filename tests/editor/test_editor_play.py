@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from backends.base import Backend
 from components import Transform
 from editor.model import EditorModel
 from editor.play import Keys, PlaySession, input_state, scene_copy
@@ -70,14 +71,14 @@ def test_play_with_a_backend_renders_frames(backend_factory):
     model.scene.close()
 
 
-class _Failing:
-    """A backend stand-in whose render always fails the way an unsupported feature does."""
+class _Failing(Backend):
+    """A backend whose render always fails the way an unsupported feature does."""
 
     name = "failing"
-    precision = "f32"
-    camera_relative = True
-    bvh_width = 2
-    bvh_compact = False
+
+    @classmethod
+    def probe(cls):
+        return None
 
     def upload(self, packed, updates):
         return 0
@@ -85,13 +86,10 @@ class _Failing:
     def render(self, camera, width, height, aovs=()):
         raise AberrantError("the failing backend does not trace this scene")
 
-    def release(self):
-        pass
-
 
 def test_a_failing_backend_leaves_play_running_without_renders():
     model = corridor()
-    session = PlaySession(model.scene, _Failing(), size=(8, 8))  # type: ignore[arg-type]
+    session = PlaySession(model.scene, _Failing(), size=(8, 8))
     try:
         assert session.step(0.1, FORWARD) is None
         assert "does not trace" in session.error and session.backend is None

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from engine import layout
+from engine.layout import Precision
 
 # Expected (offset, size) per field, written out by hand from the std430 rules:
 # a vec4 of 4-byte scalars aligns to 16, a dvec4 to 32; a struct's size rounds
@@ -69,9 +70,9 @@ EXPECTED = {
 
 
 @pytest.mark.parametrize(("table", "precision"), sorted(EXPECTED))
-def test_offsets_and_sizes(table: str, precision: str) -> None:
+def test_offsets_and_sizes(table: str, precision: Precision) -> None:
     offsets, itemsize = EXPECTED[(table, precision)]
-    dtype = layout.table_dtype(table, precision)  # type: ignore[arg-type]
+    dtype = layout.table_dtype(table, precision)
     assert dtype.itemsize == itemsize
     assert {name: dtype.fields[name][1] for name in dtype.names} == offsets
 

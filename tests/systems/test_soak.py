@@ -200,7 +200,8 @@ def soak(backend: Backend, ticks: int) -> SoakResult:
         with App(scene, input_source=source) as app:
             for tick in range(ticks):
                 app.tick(DT)
-                position = np.array(scene.get(scene.camera_entity, Transform).position)  # type: ignore[arg-type]
+                assert scene.camera_entity is not None
+                position = np.array(scene.get(scene.camera_entity, Transform).position)
                 problem = where_wrong(solids, position)
                 assert problem is None, f"tick {tick}, camera at {position}: {problem}"
                 crossings += len(app.motion.crossings)
@@ -269,7 +270,8 @@ def test_the_level_checks_catch_a_camera_in_a_wall_or_out_of_the_level():
     scene = build_demo(DEMO)
     try:
         solids = Solids.of(scene)
-        start = np.array(scene.get(scene.camera_entity, Transform).position)  # type: ignore[arg-type]
+        assert scene.camera_entity is not None
+        start = np.array(scene.get(scene.camera_entity, Transform).position)
     finally:
         scene.close()
     assert where_wrong(solids, start) is None
