@@ -1,7 +1,7 @@
 """Flythroughs: a camera path walked by the real systems, one rendered frame per tick, to a video or PNGs.
 
 The first frame shows the path's start; each later tick advances the path by
-``duration / (frames - 1)`` seconds through :class:`~systems.camera_path.PathInput`
+``duration / (frames - 1)`` seconds through :class:`systems.camera_path.PathInput`
 (so aberrations scale the motion and portals teleport the camera) and renders.
 Outputs: ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
 to even by repeating the last row/column), ``.gif`` (Pillow, looping; identical
@@ -37,15 +37,15 @@ from typing import TextIO
 
 import numpy as np
 
+from aberrant.progress import Progress
 from backends.base import Backend
 from components import Camera, Transform
-from systems.app import App
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.input import NoInput
 from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
-from aberrant.progress import Progress
 from engine.scene import Scene
+from systems.app import App
+from systems.camera_path import CameraPath, Keyframe
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).

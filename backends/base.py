@@ -103,7 +103,7 @@ class Backend(ABC):
     def check_request(self, width: int, height: int, aovs: Sequence[str], *, uploaded: bool) -> tuple[int, int]:
         """Validate a render request the same way in every backend; returns ``(width, height)`` as ints.
 
-        Raises :class:`AberrantError` for a render before any upload, an unknown AOV name or a
+        Raises :class:`engine.errors.AberrantError` for a render before any upload, an unknown AOV name or a
         non-positive image size.
         """
         if not uploaded:
@@ -156,7 +156,7 @@ def resolve_name(name: str | None = None, *, fallback: bool = True, log: object 
     ``auto`` picks the fastest available and says which. A named backend that
     cannot run falls back to ``auto`` with a one-line message (why, and which
     backend instead) when ``fallback`` is true, and raises
-    :class:`BackendUnavailable` otherwise.
+    :class:`engine.errors.BackendUnavailable` otherwise.
     """
     say = log if callable(log) else (lambda message: print(message, file=sys.stderr))
     name = name or default_backend_name()

@@ -1,4 +1,6 @@
-"""The editor window: glfw + a moderngl context + Dear ImGui's glfw/OpenGL 3 backends, around :class:`EditorUi`.
+"""The editor window: glfw, a moderngl context and Dear ImGui's glfw/OpenGL 3 backends around the UI.
+
+The UI is :class:`editor.ui.EditorUi`, which needs no window (tests drive it headless).
 
 One OpenGL context is shared by everything: moderngl wraps the window's
 context (``moderngl.create_context()``), the GLSL tracer dispatches into it

@@ -2,7 +2,7 @@
 
 Starting play writes the edited scene to JSON (the same text a save writes)
 and loads that text as a separate scene with its own esper world; an
-:class:`~systems.app.App` runs camera movement, portal teleport, upload and
+:class:`systems.app.App` runs camera movement, portal teleport, upload and
 render on the copy with keyboard and mouse input. Stopping discards the
 copy. The edited scene is never touched, so a save after Stop is byte for
 byte the save before Play.
@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from backends.base import Backend, Frame
-from systems.app import App
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
 from engine.scene import Scene
 from engine.scene_file import load_scene, scene_to_json
+from systems.app import App
 
 #: Degrees turned per pixel of mouse movement.
 MOUSE_SENSITIVITY = 0.15

@@ -2,7 +2,7 @@
 
 It needs an imgui context but no window: the caller runs ``new_frame()``,
 :meth:`EditorUi.draw` and ``render()``. The GL side (textures for the
-viewport) comes in as an :data:`~editor.panels.viewport.ImageSource`, so
+viewport) comes in as an :data:`editor.panels.viewport.ImageSource`, so
 headless tests drive the very same code with simulated input.
 """
 

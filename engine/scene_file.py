@@ -1,6 +1,6 @@
 """Scene files: JSON in, JSON out (DESIGN.md section 10).
 
-Loading parses with :mod:`json` only (never executes code), builds the scene
+Loading parses with ``json`` only (never executes code), builds the scene
 through the component dataclasses so every value is validated in one place,
 and turns each failure into a one-line :class:`SceneFileError` that names the
 file, the entity and the field. Mesh files are read at load time, so a

@@ -141,5 +141,5 @@ def dumps(value: object, indent: int = 0) -> str:
 
 
 def scene_to_json(scene: Scene, target_dir: Path | None = None) -> str:
-    """The exact text :func:`save_scene` writes."""
+    """The exact text :func:`engine.scene_file.save_scene` writes."""
     return dumps(scene_document(scene, target_dir)) + "\n"

@@ -154,7 +154,7 @@ def teleport_path(
 
 
 class PortalTeleportProcessor(esper.Processor):
-    """Teleports the camera along this tick's path (from :class:`MotionRecord`) through linked portals."""
+    """Teleports the camera along this tick's path (from :class:`systems.state.MotionRecord`) through linked portals."""
 
     def __init__(self, scene: Scene, motion: MotionRecord, max_crossings: int = MAX_CROSSINGS) -> None:
         self.scene = scene

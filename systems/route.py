@@ -1,6 +1,6 @@
 """Camera paths designed as a walk through the *world*, converted to the path the real systems replay.
 
-A :class:`~systems.camera_path.CameraPath` is replayed as local moves at
+A :class:`systems.camera_path.CameraPath` is replayed as local moves at
 perceived speed: inside an aberration the camera covers ``s`` times the
 distance (DESIGN.md section 8) and after a portal it carries on relative to
 its new pose. So a path written in world coordinates would drift off course
@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.scene import Scene
 from systems.camera_movement import SpeedBox, active_box, first_face_crossing, speed_boxes
+from systems.camera_path import CameraPath, Keyframe
 from systems.portal_teleport import portal_links, segment_crossing
 
 #: Walking pace (perceived units per second) and turning rate (degrees per second) of the stops' timing.

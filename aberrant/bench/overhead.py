@@ -1,6 +1,6 @@
 """Engine overhead per tick (issue 10, target 4): every system but the backend's render, 1,000 entities, one moving.
 
-The real :class:`~systems.app.App` runs the real systems (camera movement,
+The real :class:`systems.app.App` runs the real systems (camera movement,
 portal teleport, GPU upload into a real backend, the render system) over a
 scene of 1,000 boxes; only the backend's ``render`` is skipped, by a thin
 wrapper that forwards ``upload`` and returns an empty frame. Before each
@@ -22,11 +22,11 @@ import numpy as np
 
 from backends.base import AOVS, Backend, Frame, backend_class
 from components import Transform
-from systems.app import App
 from engine.camera_view import CameraView
 from engine.input import NoInput
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from systems.app import App
 
 ENTITIES = 1000
 TICKS = 60

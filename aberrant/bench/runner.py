@@ -18,8 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from backends.base import BACKENDS, backend_class
-from engine.atomic_files import write_atomically
 from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
@@ -30,9 +28,11 @@ from aberrant.bench.reference import ReferenceCache
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from aberrant.progress import Progress, clock
+from backends.base import BACKENDS, backend_class
+from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from aberrant.progress import Progress, clock
 from engine.scene import Scene
 
 FORMAT = "aberrant-bench"
@@ -87,7 +87,10 @@ def make_config(
     overhead: bool = True,
     command: str = "",
 ) -> BenchConfig:
-    """Check every argument before anything runs; a bad one is an :class:`AberrantError` naming the choices."""
+    """Check every argument before anything runs.
+
+    A bad one is an :class:`engine.errors.AberrantError` naming the choices.
+    """
     specs = resolve_scenes(_names(scenes), quick)
     chosen = _names(backends) or list(DEFAULT_BACKENDS)
     for name in chosen:

@@ -1,6 +1,6 @@
 """The scenes ``aberrant bench`` measures, and the builders the pytest benchmarks and parity tests share.
 
-One registry (:data:`BENCH_SCENES`) names every scene with how to build it,
+One registry (:func:`bench_scenes`) names every scene with how to build it,
 whether it has a fixed frame size (the watertightness views aim pixel
 centres at mesh vertices and edges, so only their own size tests anything),
 and its group (``bench``, ``demos``, ``hard``, ``overhead``). Builders take a

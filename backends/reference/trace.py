@@ -31,7 +31,21 @@ from backends.reference.portals import Portals, nearest_portal_hits, teleport
 from backends.reference.shading import ShadingSettings, shade, to_uint8
 from backends.reference.traverse import Geometry, MeshHits, nearest_mesh_hits
 
-__all__ = ["ShadingSettings", "Space", "TraceResult", "to_uint8", "trace"]
+__all__ = [
+    "Event",
+    "RayState",
+    "ShadingSettings",
+    "Space",
+    "TraceResult",
+    "advance",
+    "enter_at_start",
+    "next_event",
+    "nudge_of",
+    "t_min_of",
+    "tie_window",
+    "to_uint8",
+    "trace",
+]
 
 # Event kinds; also the kinds of surface a ray can be leaving (MISS: none).
 MISS, MESH, ABERRATION, PORTAL = 0, 1, 2, 3
@@ -217,7 +231,7 @@ def advance(space: Space, state: RayState, event: Event) -> RayState:
     """Move rays to their box face or portal, add the segment to L and Λ, apply the event; ``n += 1``.
 
     A box face: the ray stays at the face point and is leaving that face. A
-    portal: the ray continues from the target quad (:func:`teleport`) and is
+    portal: the ray continues from the target quad (:func:`backends.reference.portals.teleport`) and is
     leaving it. Either way the active box is then looked up just past the new
     origin along ``r`` and the transition rule updates ``w`` and ``r``.
     """
