@@ -23,7 +23,7 @@ from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 
-#: Outputs a backend can write (DESIGN.md section 5).
+#: Outputs a backend can write (docs/semantics.md, "What a frame holds").
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")
 
 #: Registered backends: name -> "module:Class", imported on first use.

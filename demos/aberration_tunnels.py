@@ -8,7 +8,7 @@ crossed twice as fast), blue stretches it along z (twice as long inside, crossed
 at half speed), green compresses x (narrower), purple compresses y (lower).
 
 The thesis used its radial method; these boxes are ``metric`` instead, on
-purpose: its rule is the one the camera moves by (DESIGN.md section 6), so the
+purpose: its rule is the one the camera moves by (docs/semantics.md, "Aberrations"), so the
 perceived length of a tunnel is exactly the time it takes to walk it. The
 flythrough shows it: red zips by, blue drags on. The world-space checker on
 walls and ground turns into short, long, thin or flat cells inside.
@@ -22,10 +22,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from demos.kit import BLOCK, BLUE, CHALK, GOLD, GREEN, IVORY, PURPLE, RED, SAND, SLATE, Color, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 #: Inside width, height and length of every tunnel, and its wall thickness.
 WIDTH, HEIGHT, LENGTH, WALL = 2.6, 3.0, 10.0, 0.3

@@ -11,7 +11,7 @@ box that is *active* there:
   squeezes width: it wins the overlap, so there the rows close in but no longer bunch.
 
 At every point at most one box is active, the containing one with the highest
-priority (DESIGN.md section 6). The flythrough walks down the colonnade: the
+priority (docs/semantics.md, "Aberrations"). The flythrough walks down the colonnade: the
 same steps carry the camera three times as far in orange, half as far in cyan, at
 normal pace in magenta.
 """
@@ -19,10 +19,10 @@ normal pace in magenta.
 from __future__ import annotations
 
 from demos.kit import CHALK, GOLD, IVORY, NAVY, ROSE, SAND, SKY, SLATE, block, use_blocks
-from systems.route import Stop, with_scene
-from systems.camera_path import CameraPath
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.camera_path import CameraPath
+from systems.route import Stop, with_scene
 
 ORANGE = (1.0, 0.55, 0.1)
 CYAN = (0.1, 0.8, 0.95)

@@ -6,7 +6,7 @@ scene's structure (entities, components, assets) changes. Each sync returns
 the :class:`engine.packed.TableUpdate` list a backend needs to upload: a static tick
 returns nothing.
 
-Float32 backends trace in camera-relative coordinates (DESIGN.md section 3):
+Float32 backends trace in camera-relative coordinates (docs/semantics.md, "Primary rays"):
 the packer subtracts a float64 *origin* near the camera from every world
 transform. The origin snaps to a grid of ``origin_cell`` units and moves only
 when the camera leaves its cell, so walking does not re-upload every

@@ -1,4 +1,4 @@
-"""Scene files: JSON in, JSON out (DESIGN.md section 10).
+"""Scene files: JSON in, JSON out (docs/design.md section 8).
 
 Loading parses with ``json`` only (never executes code), builds the scene
 through the component dataclasses so every value is validated in one place,

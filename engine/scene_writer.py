@@ -1,4 +1,4 @@
-"""Scene files, the writing half: a scene as canonical JSON (DESIGN.md section 10).
+"""Scene files, the writing half: a scene as canonical JSON (docs/design.md section 8).
 
 Canonical means fixed key order, every field spelt out, floats by ``repr`` so
 they round-trip exactly and rotations as quaternions: saving a loaded file

@@ -1,6 +1,6 @@
 """Portal teleport: the camera's path this tick, tested against every linked portal quad.
 
-DESIGN.md section 8.2. The test is on the *segment* walked this tick, not on
+The second system of a tick (docs/design.md section 6). The test is on the *segment* walked this tick, not on
 the end point, so a fast camera cannot tunnel through a portal; the camera
 arrives on the target quad and the target is skipped for the rest of that
 segment (and a segment that starts on a quad does not cross it), so it never

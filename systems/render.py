@@ -1,6 +1,6 @@
 """Render: one frame of the uploaded scene from the scene's camera, left where readers look.
 
-DESIGN.md section 8.4. The app, the editor and tests read the frame from the
+The last system of a tick (docs/design.md section 6). The app, the editor and tests read the frame from the
 shared :class:`systems.state.FrameSlot`.
 """
 

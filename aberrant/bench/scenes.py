@@ -171,7 +171,7 @@ def facing_portals(folder: Path) -> Scene:
     return scene
 
 
-# --- non-Euclidean overhead (issue 10): ten boxes seen through deformed space --------------------------------
+# --- non-Euclidean overhead: ten boxes seen through deformed space ------------------------------------------
 
 
 def ten_boxes_aberration(folder: Path) -> Scene:
@@ -207,7 +207,7 @@ class SceneSpec:
     group: str
     size: tuple[int, int] | None = None
     description: str = ""
-    #: The plain scene this one adds deformed space to: its frames alternate with this scene's (issue 10).
+    #: The plain scene this one adds deformed space to: its frames alternate with this scene's.
     baseline: Callable[[Path], Scene] | None = None
 
 

@@ -1,6 +1,6 @@
 """Import the thesis engine's (TelloEngine's) scene files into our scene format.
 
-Format (``shared/tello/README.md``): JSON followed by one NUL byte; a flat,
+Format (``docs/tello-format.md``; samples in ``tests/data/tello/``): JSON followed by one NUL byte; a flat,
 depth-first list of game objects whose transforms are local to their parent;
 mesh resources are binary files named by uid. What this importer maps, and why:
 
@@ -21,7 +21,7 @@ mesh resources are binary files named by uid. What this importer maps, and why:
 * **Aberrations** use the unit box [-½,½]² × [0, 1] (pivot on its bottom face,
   in local z); ours is the centred cube, so the centre moves by
   ``R (s ⊙ (0, 0, ½))``. Deformation along world axes, ``radial`` with the
-  ``restore`` exit rule (DESIGN.md section 6).
+  ``restore`` exit rule (docs/semantics.md, rules 7-8).
 * **Portals** are the quad [-1, 1]² in local XY facing +Z, exactly ours: no
   conversion; ``connectedGO`` becomes the target's (de-duplicated) name.
 * **Camera** component: the camera's world pose (scale dropped). Without one, a
@@ -40,13 +40,6 @@ from typing import Any
 
 import numpy as np
 
-from components import Aberration, Mesh, Portal, Transform, ValidationError
-from components.validation import real, vector
-from engine.atomic_files import write_atomically
-from engine.errors import AberrantError
-from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
-from engine.scene import Scene
-from engine.scene_file import save_scene
 from aberrant.importers.tello_format import (
     ABERRATION,
     CAMERA,
@@ -63,6 +56,13 @@ from aberrant.importers.tello_format import (
     read_mesh_resource,
     read_tello_document,
 )
+from components import Aberration, Mesh, Portal, Transform, ValidationError
+from components.validation import real, vector
+from engine.atomic_files import write_atomically
+from engine.errors import AberrantError
+from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
+from engine.scene import Scene
+from engine.scene_file import save_scene
 
 #: The thesis's box pivot: the centre of [-½,½]² × [0, 1] in its local space.
 BOX_CENTRE = np.array([0.0, 0.0, 0.5])

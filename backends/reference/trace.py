@@ -1,6 +1,6 @@
-"""The ray's journey (DESIGN.md section 5; exact rules in docs/semantics.md), vectorised over rays in float64.
+"""The ray's journey (docs/semantics.md sections 1-13), vectorised over rays in float64.
 
-Every ray carries the full state of section 5 as arrays: origin ``o``, world
+Every ray carries the full state of semantics section 1 as arrays: origin ``o``, world
 direction ``r``, perceived direction ``w``, primary direction ``d0``, the
 active aberration, path length ``L``, perceived length ``Λ``, event count
 ``n`` and the surface it is leaving. Primary rays first take the transition

@@ -1,4 +1,4 @@
-"""Hard portal cases (issue 6): facing portals, the camera along, on and at the edge of a quad, two portals
+"""Hard portal cases: facing portals, the camera along, on and at the edge of a quad, two portals
 in one tick, and a portal 1e5 from the origin -- rays in every backend and the camera through the systems.
 
 The rules (docs/semantics.md section 3, systems/portal_teleport.py):
@@ -31,12 +31,12 @@ from backends.base import AOVS, Backend, Frame
 from backends.reference.backend import ReferenceBackend
 from backends.reference.shading import to_uint8
 from components import Transform
-from systems.app import App
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix
 from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.app import App
 from systems.portal_teleport import MAX_CROSSINGS
 
 Vec3 = tuple[float, float, float]

@@ -1,4 +1,4 @@
-"""Fast backends against the float64 reference: same scene, same camera, same answers (issues 3 and 4).
+"""Fast backends against the float64 reference: same scene, same camera, same answers.
 
 Every fast backend is listed once in FAST_BACKENDS; each scene is rendered by
 the reference once per module and compared with every backend: instance ids
@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from aberrant.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from backends.base import AOVS, Frame
 from backends.reference.backend import ReferenceBackend
 from components import Transform
 from demos import starter
-from aberrant.bench.scenes import FAR, inside_grid_cube, inside_sphere, translated
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError
 from engine.packing import ScenePacker

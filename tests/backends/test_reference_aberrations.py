@@ -1,6 +1,6 @@
 """Aberrations in the float64 reference tracer: closed forms, rules on single rays, walking, hard inputs.
 
-The rules are those of DESIGN.md section 6 as made precise in docs/semantics.md.
+The rules are those of docs/semantics.md ("Aberrations", rules 3-9).
 Expected values are computed here by hand (independently of the tracer's code).
 """
 
@@ -14,12 +14,12 @@ from backends.reference.aberrations import SigmaBounds, sigma
 from backends.reference.backend import ReferenceBackend
 from backends.reference.trace import TraceResult
 from components import Aberration, Transform
-from systems.app import App
 from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_to_matrix, trs_inverse
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.app import App
 from systems.camera_movement import speed_boxes, walk
 
 #: The wall's front face lies in the plane z = WALL_Z.

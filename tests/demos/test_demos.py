@@ -94,7 +94,7 @@ def test_demo_renders_headless_with_the_reference_backend(demo, backend_factory)
     assert len(np.unique(frame.color.reshape(-1, 4), axis=0)) > 20
 
 
-# --- the showcase levels (issue 7) -------------------------------------------------
+# --- the showcase levels ---------------------------------------------------------
 
 #: The thesis's four levels and the ones beyond it, after the starter.
 SHOWCASE = (
@@ -187,9 +187,9 @@ def test_deformations_change_the_picture(demo, frames, backend_factory):
 
 def _walk(demo: str, dt: float, ticks: int | None = None) -> tuple[object, list[str], np.ndarray]:
     """Walk the demo's camera path through the movement and teleport systems (no tracer); crossings and the end."""
+    from aberrant.flythrough import path_for
     from components import Transform
     from systems.app import App
-    from aberrant.flythrough import path_for
 
     scene = build_demo(demo)
     try:
@@ -233,8 +233,8 @@ def test_flythrough_walks_through_its_portals_and_ends_where_designed(demo_name)
 
 def test_a_few_flythrough_ticks_render(backend_factory):
     """Three ticks of a path through portals and an aberration, rendered by the reference backend."""
-    from systems.app import App
     from aberrant.flythrough import path_for
+    from systems.app import App
 
     scene = build_demo("portal_in_aberration")
     try:

@@ -1,4 +1,4 @@
-"""Every demo runs 5 ticks headless and renders in every backend with parity to the reference (issue 7).
+"""Every demo runs 5 ticks headless and renders in every backend with parity to the reference.
 
 The imported TelloEngine ``AberrationRoom`` renders in every backend too. Each
 fast backend's frame is compared with the float64 reference on the same scene
@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from aberrant.importers.tello import import_tello
 from components import Transform
 from demos import build_demo, demo_names
-from systems.app import App, render_once
 from engine.input import InputState, ScriptedInput
 from engine.scene import Scene
-from aberrant.importers.tello import import_tello
+from systems.app import App, render_once
 
 SIZE = (64, 48)
 FAST = [("glsl", "f32"), ("opencl", "f32"), ("opencl", "f64")]

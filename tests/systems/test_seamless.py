@@ -1,4 +1,4 @@
-"""Walking through a portal is seamless (issue 6): the real systems, tick by tick, with a tracer.
+"""Walking through a portal is seamless: the real systems, tick by tick, with a tracer.
 
 Corridor B is an exact copy of corridor A moved by ``X`` (a turn and a
 translation far away), and door B is door A moved by the same ``X``: so
@@ -20,12 +20,12 @@ import itertools
 
 import numpy as np
 
-from systems.app import App
 from engine.camera_view import scene_camera
 from engine.input import InputState, ScriptedInput
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 from engine.settings import Settings
+from systems.app import App
 
 #: Corridor B = X(corridor A): a quarter turn about y, then far away.
 TURN_DEG = 90.0

@@ -1,4 +1,4 @@
-"""Soak (issue 11, part 3): 10,000 headless ticks of a demo through aberrations and portals.
+"""Soak: 10,000 headless ticks of a demo through aberrations and portals.
 
 The demo ``portal_in_aberration`` (an atrium, a hall filled by a metric
 aberration, a garden, two portal pairs) is walked by its own camera path,
@@ -50,12 +50,12 @@ from backends.base import Backend, backend_class
 from components import Mesh, Transform
 from demos import build_demo
 from demos.portal_in_aberration import camera_path
-from systems.app import App
-from systems.camera_path import CameraPath, PathInput
 from engine.input import InputState
 from engine.maths import trs_inverse
 from engine.scene import Scene
+from systems.app import App
 from systems.camera_movement import active_box, speed_boxes
+from systems.camera_path import CameraPath, PathInput
 from systems.gpu_upload import GpuUploadProcessor
 from systems.render import RenderProcessor
 from systems.state import FrameSlot, UploadStats
