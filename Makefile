@@ -41,7 +41,7 @@ DEMO := aberration_tunnels
 DEMO_OUT := out/$(DEMO).png
 DEMO_CLIP := out/$(DEMO).gif
 
-.PHONY: help setup apt-packages demo gallery test bench bench-pytest lint format clean
+.PHONY: help setup apt-packages demo gallery docs test bench bench-pytest lint format clean
 
 help:
 	@echo "aberrant — make targets:"
@@ -50,6 +50,7 @@ help:
 	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
 	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
 	echo "  make gallery render every demo into docs/gallery/ (the README's gallery)"
+	echo "  make docs    the API reference from the docstrings (pdoc) into out/api/; fails on broken references"
 	echo "  make lint    ruff check + ruff format --check + mypy (the packages; configured in pyproject.toml)"
 	echo "  make format  ruff format + ruff check --fix"
 	echo "  make setup   only install (apt packages, .venv, the package in editable mode)"
@@ -138,6 +139,12 @@ gallery: | apt-packages $(INSTALLED)
 	@for demo in $$("$(PY)" -c 'from demos import demo_names; print(" ".join(demo_names()))'); do
 	  "$(VENV)/bin/aberrant" render "$$demo" --backend reference --size 320x240 --out "docs/gallery/$$demo.png"
 	done
+
+# The API reference: HTML from every package's docstrings into out/api/ (docs/build_api.py). It fails on
+# pdoc's warnings and on cross-references that would render without a link. No display: importing the
+# editor's modules must not need one.
+docs: | apt-packages $(INSTALLED)
+	@env -u DISPLAY -u WAYLAND_DISPLAY "$(PY)" docs/build_api.py out/api
 
 test: | apt-packages $(INSTALLED)
 	@"$(PY)" -m pytest -q $(PYTEST_ARGS)

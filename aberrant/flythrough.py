@@ -1,7 +1,7 @@
 """Flythroughs: a camera path walked by the real systems, one rendered frame per tick, to a video or PNGs.
 
 The first frame shows the path's start; each later tick advances the path by
-``duration / (frames - 1)`` seconds through :class:`~systems.camera_path.PathInput`
+``duration / (frames - 1)`` seconds through :class:`systems.camera_path.PathInput`
 (so aberrations scale the motion and portals teleport the camera) and renders.
 Outputs: ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
 to even by repeating the last row/column), ``.gif`` (Pillow, looping; identical

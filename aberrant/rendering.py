@@ -43,7 +43,7 @@ def render(
 ) -> Frame:
     """Render one frame of ``scene`` from its camera; the frame's AOVs are numpy arrays.
 
-    ``backend`` is a :class:`~backends.base.Backend` you opened (used, and left
+    ``backend`` is a :class:`backends.base.Backend` you opened (used, and left
     open for the next frame), or a name (``reference``, ``glsl``, ``opencl``,
     ``auto``), or ``None`` for ``$ABERRANT_BACKEND`` or ``auto``. A backend
     chosen by name is probed first: one that cannot start here falls back to

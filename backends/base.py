@@ -23,7 +23,7 @@ from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 
-#: Outputs a backend can write (DESIGN.md section 5).
+#: Outputs a backend can write (docs/semantics.md, "What a frame holds").
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")
 
 #: Registered backends: name -> "module:Class", imported on first use.
@@ -104,7 +104,7 @@ class Backend(ABC):
     def check_request(self, width: int, height: int, aovs: Sequence[str], *, uploaded: bool) -> tuple[int, int]:
         """Validate a render request the same way in every backend; returns ``(width, height)`` as ints.
 
-        Raises :class:`AberrantError` for a render before any upload, an unknown AOV name or a
+        Raises :class:`engine.errors.AberrantError` for a render before any upload, an unknown AOV name or a
         non-positive image size.
         """
         if not uploaded:
@@ -157,7 +157,7 @@ def resolve_name(name: str | None = None, *, fallback: bool = True, log: object 
     ``auto`` picks the fastest available and says which. A named backend that
     cannot run falls back to ``auto`` with a one-line message (why, and which
     backend instead) when ``fallback`` is true, and raises
-    :class:`BackendUnavailable` otherwise.
+    :class:`engine.errors.BackendUnavailable` otherwise.
     """
     say = log if callable(log) else (lambda message: print(message, file=sys.stderr))
     name = name or default_backend_name()
@@ -185,5 +185,5 @@ def resolve_name(name: str | None = None, *, fallback: bool = True, log: object 
 def create_backend(
     name: str | None = None, *, precision: Precision | None = None, fallback: bool = True, log: object = None
 ) -> Backend:
-    """A ready backend, chosen as :func:`resolve_name` does."""
+    """A ready backend, chosen as :func:`backends.base.resolve_name` does."""
     return backend_class(resolve_name(name, fallback=fallback, log=log))(precision=precision)

@@ -1,4 +1,4 @@
-"""A box of deformed space (DESIGN.md section 6)."""
+"""A box of deformed space (docs/semantics.md, "Aberrations")."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ class Camera:
     """A pinhole camera looking along its local -Z, +Y up.
 
     ``speed`` is the perceived walking speed in units per second; aberrations
-    scale the world displacement it produces (DESIGN.md section 8).
+    scale the world displacement it produces (docs/semantics.md, "The camera's walk").
     """
 
     fov_deg: float = 60.0

@@ -1,4 +1,4 @@
-"""One end of a portal (DESIGN.md section 7)."""
+"""One end of a portal (docs/semantics.md, "Portals")."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Demo levels, built as code.
 
 Each demo is a module ``demos/<name>.py`` whose docstring's first line
-describes it and whose ``build()`` returns a :class:`~engine.scene.Scene`.
+describes it and whose ``build()`` returns a :class:`engine.scene.Scene`.
 Modules are imported only when a demo is described or built, so listing the
 demos stays cheap and one broken demo cannot break the others.
 """

@@ -8,7 +8,7 @@ crossed twice as fast), blue stretches it along z (twice as long inside, crossed
 at half speed), green compresses x (narrower), purple compresses y (lower).
 
 The thesis used its radial method; these boxes are ``metric`` instead, on
-purpose: its rule is the one the camera moves by (DESIGN.md section 6), so the
+purpose: its rule is the one the camera moves by (docs/semantics.md, "Aberrations"), so the
 perceived length of a tunnel is exactly the time it takes to walk it. The
 flythrough shows it: red zips by, blue drags on. The world-space checker on
 walls and ground turns into short, long, thin or flat cells inside.

@@ -11,7 +11,7 @@ box that is *active* there:
   squeezes width: it wins the overlap, so there the rows close in but no longer bunch.
 
 At every point at most one box is active, the containing one with the highest
-priority (DESIGN.md section 6). The flythrough walks down the colonnade: the
+priority (docs/semantics.md, "Aberrations"). The flythrough walks down the colonnade: the
 same steps carry the camera three times as far in orange, half as far in cyan, at
 normal pace in magenta.
 """

@@ -33,7 +33,7 @@ PORTAL_PAIR_GAP = 3.0
 
 
 class AddingMixin:
-    """Entity creation for :class:`~editor.model.EditorModel`."""
+    """Entity creation for :class:`editor.model.EditorModel`."""
 
     scene: Scene
     selected_name: str | None

@@ -44,7 +44,7 @@ class Pending:
 
 
 class DocumentsMixin:
-    """File handling for :class:`~editor.model.EditorModel`."""
+    """File handling for :class:`editor.model.EditorModel`."""
 
     scene: Scene
     path: Path | None

@@ -2,7 +2,7 @@
 
 :class:`EditorModel` holds the edited scene, its file, the selection and the
 undo/redo history. Panels and gizmos never touch the scene directly: every
-change is a :class:`~editor.commands.Command`, so each one can be undone and
+change is a :class:`editor.commands.Command`, so each one can be undone and
 the title can tell whether there are unsaved changes. File operations live
 in :mod:`editor.documents` (a mixin), entity creation in :mod:`editor.adding`.
 """

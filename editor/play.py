@@ -2,7 +2,7 @@
 
 Starting play writes the edited scene to JSON (the same text a save writes)
 and loads that text as a separate scene with its own esper world; an
-:class:`~systems.app.App` runs camera movement, portal teleport, upload and
+:class:`systems.app.App` runs camera movement, portal teleport, upload and
 render on the copy with keyboard and mouse input. Stopping discards the
 copy. The edited scene is never touched, so a save after Stop is byte for
 byte the save before Play.

@@ -2,7 +2,7 @@
 
 It needs an imgui context but no window: the caller runs ``new_frame()``,
 :meth:`EditorUi.draw` and ``render()``. The GL side (textures for the
-viewport) comes in as an :data:`~editor.panels.viewport.ImageSource`, so
+viewport) comes in as an :data:`editor.panels.viewport.ImageSource`, so
 headless tests drive the very same code with simulated input.
 """
 
@@ -44,7 +44,7 @@ def initial_view(model: EditorModel) -> EditorView:
 
 class EditorUi:
     """Panels and the state between frames; owns the play session. The menus and the viewport see it as
-    their :class:`~editor.panels.shell.EditorShell`."""
+    their :class:`editor.panels.shell.EditorShell`."""
 
     def __init__(self, model: EditorModel, host: BackendHost | None = None, images: ImageSource | None = None) -> None:
         self.model = model

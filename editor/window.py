@@ -1,4 +1,6 @@
-"""The editor window: glfw + a moderngl context + Dear ImGui's glfw/OpenGL 3 backends, around :class:`EditorUi`.
+"""The editor window: glfw, a moderngl context and Dear ImGui's glfw/OpenGL 3 backends around the UI.
+
+The UI is :class:`editor.ui.EditorUi`, which needs no window (tests drive it headless).
 
 One OpenGL context is shared by everything: moderngl wraps the window's
 context (``moderngl.create_context()``), the GLSL tracer dispatches into it
@@ -16,7 +18,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeAlias
 
 import numpy as np
 from imgui_bundle import imgui, implot  # first: points the glfw module at imgui-bundle's libglfw
@@ -33,8 +35,8 @@ if TYPE_CHECKING:
 
     from engine.scene import Scene
 
-    #: A glfw window handle (the stub names its pointer type only privately).
-    Window = glfw._GLFWwindowPointerT
+    #: A glfw window handle (the stub names its pointer type only privately; a string, so docs tools can run this).
+    Window: TypeAlias = "glfw._GLFWwindowPointerT"
 
 #: Backends the editor tries, in order, when none is named (GLSL first: it draws without a read-back).
 PREFERRED_BACKENDS = ("glsl", "opencl", "reference")

@@ -91,7 +91,10 @@ class Bvh:
 
     @property
     def width(self) -> int:
-        """Children per node: 2 (:data:`BVH_NODE_DTYPE`), 4 or 8 (the wide dtypes of :data:`BVH_WIDTHS`)."""
+        """Children per node: 2 (:data:`engine.layout.BVH_NODE_DTYPE`), 4 or 8.
+
+        The wide nodes' dtypes are those of :data:`engine.layout.BVH_WIDTHS`.
+        """
         return next(w for w, dtype in BVH_WIDTHS.items() if self.nodes.dtype == dtype)
 
     def depth(self) -> int:

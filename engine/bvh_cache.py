@@ -84,8 +84,8 @@ def cached_bvh(
     cache_dir: Path | None = None,
     width: int = 2,
 ) -> Bvh:
-    """:func:`build_bvh` (then :func:`collapse` for ``width`` 4 or 8) behind an in-process and an on-disk
-    cache keyed by content, parameters and width."""
+    """:func:`engine.bvh.build_bvh` (then :func:`engine.bvh_wide.collapse` for ``width`` 4 or 8) behind
+    an in-process and an on-disk cache keyed by content, parameters and width."""
     params = params if params is not None else BvhParams()
     if width not in BVH_WIDTHS:
         raise ValueError(f"BVH width must be one of {sorted(BVH_WIDTHS)}, got {width!r}")

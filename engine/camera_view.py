@@ -41,12 +41,12 @@ class CameraView:
         return local @ self.rotation.T
 
     def sigma_bounds(self, aspect: float) -> tuple[np.ndarray, np.ndarray]:
-        """The radial mode's ``m_k`` and ``M_k`` (DESIGN.md section 6)."""
+        """The radial mode's ``m_k`` and ``M_k`` (docs/semantics.md rule 8)."""
         corners = self.corner_directions(aspect)
         return corners.min(axis=0), corners.max(axis=0)
 
     def primary_directions(self, width: int, height: int) -> np.ndarray:
-        """Unit world directions (H, W, 3), float64, exactly per DESIGN.md section 3."""
+        """Unit world directions (H, W, 3), float64, exactly as docs/semantics.md, "Primary rays", says."""
         aspect = width / height
         t = math.tan(math.radians(self.fov_deg) / 2.0)
         x = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * aspect * t

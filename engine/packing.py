@@ -3,10 +3,10 @@
 The packer is incremental: it follows the scene's change journal and
 re-packs a table row when one entity changes, the whole table only when the
 scene's structure (entities, components, assets) changes. Each sync returns
-the :class:`TableUpdate` list a backend needs to upload: a static tick
+the :class:`engine.packed.TableUpdate` list a backend needs to upload: a static tick
 returns nothing.
 
-Float32 backends trace in camera-relative coordinates (DESIGN.md section 3):
+Float32 backends trace in camera-relative coordinates (docs/semantics.md, "Primary rays"):
 the packer subtracts a float64 *origin* near the camera from every world
 transform. The origin snaps to a grid of ``origin_cell`` units and moves only
 when the camera leaves its cell, so walking does not re-upload every
@@ -63,7 +63,8 @@ def _at_least_one_row(table: np.ndarray) -> np.ndarray:
 
 
 class ScenePacker:
-    """Keeps a :class:`PackedScene` in step with a :class:`Scene`, one journal cursor at a time."""
+    """Keeps a :class:`engine.packed.PackedScene` in step with a :class:`engine.scene.Scene`, one journal
+    cursor at a time."""
 
     def __init__(
         self,

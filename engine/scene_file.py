@@ -1,6 +1,6 @@
-"""Scene files: JSON in, JSON out (DESIGN.md section 10).
+"""Scene files: JSON in, JSON out (docs/design.md section 8).
 
-Loading parses with :mod:`json` only (never executes code), builds the scene
+Loading parses with ``json`` only (never executes code), builds the scene
 through the component dataclasses so every value is validated in one place,
 and turns each failure into a one-line :class:`SceneFileError` that names the
 file, the entity and the field. Mesh files are read at load time, so a
@@ -369,7 +369,10 @@ class _Reader:
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Read a scene file; raises :class:`SceneFileError` naming file, entity and field on any problem."""
+    """Read a scene file.
+
+    Raises :class:`engine.scene_file.SceneFileError` naming file, entity and field on any problem.
+    """
     file = str(path)
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -422,7 +425,10 @@ def _unencodable_string(doc: object) -> str | None:
 
 
 def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
-    """Write ``scene`` to ``path`` atomically; raises :class:`SceneFileError` (old file intact) on failure."""
+    """Write ``scene`` to ``path`` atomically.
+
+    Raises :class:`engine.scene_file.SceneFileError` (the old file intact) on failure.
+    """
     file = str(path)
     target_dir = Path(os.path.abspath(path)).parent
     try:

@@ -1,4 +1,4 @@
-"""Scene files, the writing half: a scene as canonical JSON (DESIGN.md section 10).
+"""Scene files, the writing half: a scene as canonical JSON (docs/design.md section 8).
 
 Canonical means fixed key order, every field spelt out, floats by ``repr`` so
 they round-trip exactly and rotations as quaternions: saving a loaded file
@@ -141,5 +141,5 @@ def dumps(value: object, indent: int = 0) -> str:
 
 
 def scene_to_json(scene: Scene, target_dir: Path | None = None) -> str:
-    """The exact text :func:`save_scene` writes."""
+    """The exact text :func:`engine.scene_file.save_scene` writes."""
     return dumps(scene_document(scene, target_dir)) + "\n"

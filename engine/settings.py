@@ -1,4 +1,4 @@
-"""Scene-wide settings (DESIGN.md sections 4 and 5)."""
+"""Scene-wide settings: background, light, ambient, the event limit (docs/semantics.md)."""
 
 from __future__ import annotations
 

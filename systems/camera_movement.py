@@ -1,6 +1,6 @@
 """Camera movement: input to perceived velocity, mouse look, and a walk scaled by aberrations.
 
-DESIGN.md section 8.1. The camera's perceived velocity ``v`` becomes the
+The first system of a tick (docs/design.md section 6). The camera's perceived velocity ``v`` becomes the
 world displacement ``R (s ⊙ (Rᵀ v))·dt`` inside the aberration active at the
 camera (``s = 1 + D``), the same rule rays follow, so what you see is where
 you go. The walk is split into sub-steps at every box face it crosses, so a
@@ -59,8 +59,8 @@ def speed_box(entity: int, transform: Transform, aberration: Aberration) -> Spee
     """The speed rule of one aberration entity.
 
     Metric boxes scale along their own rotated axes (scale ignored), as rays
-    do. Radial and additive deformations are world-axis vectors (DESIGN.md
-    section 6), so their boxes scale speed along the world axes.
+    do. Radial and additive deformations are world-axis vectors (docs/semantics.md
+    rule 8), so their boxes scale speed along the world axes.
     """
     s = 1.0 + np.asarray(aberration.deformation, dtype=np.float64)
     if aberration.mode == "metric":

@@ -11,7 +11,7 @@ Interpolation is C1 in *time*, so a flythrough has no velocity jumps at keyframe
   exactly a slerp and every sample is a unit quaternion.
 
 A path does not place the camera frame by frame: :meth:`CameraPath.inputs`
-returns an :class:`~engine.input.InputSource` that turns each tick's step
+returns an :class:`engine.input.InputSource` that turns each tick's step
 along the path into what a player would do: yaw/pitch look deltas and a move
 in the camera's own frame. The camera movement system then walks it through
 the aberrations (which scale the step) and the portal system teleports it, and

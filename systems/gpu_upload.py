@@ -1,6 +1,6 @@
 """GPU upload: re-pack only what changed since the last tick and hand it to the backend.
 
-DESIGN.md section 8.3. The packer follows the scene's change journal, so a
+The third system of a tick (docs/design.md section 6). The packer follows the scene's change journal, so a
 static tick uploads nothing and a moved entity re-uploads its instance row,
 not its mesh.
 """

@@ -1,6 +1,6 @@
 """Portal teleport: the camera's path this tick, tested against every linked portal quad.
 
-DESIGN.md section 8.2. The test is on the *segment* walked this tick, not on
+The second system of a tick (docs/design.md section 6). The test is on the *segment* walked this tick, not on
 the end point, so a fast camera cannot tunnel through a portal; the camera
 arrives on the target quad and the target is skipped for the rest of that
 segment (and a segment that starts on a quad does not cross it), so it never
@@ -154,7 +154,7 @@ def teleport_path(
 
 
 class PortalTeleportProcessor(esper.Processor):
-    """Teleports the camera along this tick's path (from :class:`MotionRecord`) through linked portals."""
+    """Teleports the camera along this tick's path (from :class:`systems.state.MotionRecord`) through linked portals."""
 
     def __init__(self, scene: Scene, motion: MotionRecord, max_crossings: int = MAX_CROSSINGS) -> None:
         self.scene = scene

@@ -1,4 +1,4 @@
-"""The one place that orders the systems of a tick (DESIGN.md section 8).
+"""The one place that orders the systems of a tick (docs/design.md section 6).
 
 esper runs processors with a higher priority first, so the values fall in
 tick order. Every processor is registered with one of these names; no other

@@ -1,7 +1,7 @@
 """Render: one frame of the uploaded scene from the scene's camera, left where readers look.
 
-DESIGN.md section 8.4. The app, the editor and tests read the frame from the
-shared :class:`~systems.state.FrameSlot`.
+The last system of a tick (docs/design.md section 6). The app, the editor and tests read the frame from the
+shared :class:`systems.state.FrameSlot`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Camera paths designed as a walk through the *world*, converted to the path the real systems replay.
 
-A :class:`~systems.camera_path.CameraPath` is replayed as local moves at
+A :class:`systems.camera_path.CameraPath` is replayed as local moves at
 perceived speed: inside an aberration the camera covers ``s`` times the
-distance (DESIGN.md section 8) and after a portal it carries on relative to
+distance (docs/semantics.md, "The camera's walk") and after a portal it carries on relative to
 its new pose. So a path written in world coordinates would drift off course
 after the first aberration or portal. :func:`route` takes the stops of the
 intended walk in world coordinates (on whichever side of a portal the camera

@@ -55,7 +55,7 @@ def aimed_fov(n: int) -> float:
     """The vertical field of view (degrees) that gives an ``n`` x ``n`` image pixel slopes of (i - c) / c.
 
     With ``c = (n - 1) / 2`` the ray of pixel (i, j) points along ``((i - c)/c, (c - j)/c, -1)``
-    in camera space (DESIGN.md section 3 with ``tan(fov/2) = n / (n - 1)``): dyadic slopes for
+    in camera space (docs/semantics.md, "Primary rays", with ``tan(fov/2) = n / (n - 1)``): dyadic slopes for
     ``n - 1`` a power of two, so rays can be aimed exactly at integer points.
     """
     return 2.0 * math.degrees(math.atan(n / (n - 1)))

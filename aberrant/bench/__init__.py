@@ -11,4 +11,22 @@ from __future__ import annotations
 
 from aberrant.bench.runner import BenchConfig, bench_command, make_config, rerender, run_bench, write_outputs
 
-__all__ = ["BenchConfig", "bench_command", "make_config", "rerender", "run_bench", "write_outputs"]
+# The modules are listed too, so that the API reference documents them.
+__all__ = [
+    "BenchConfig",
+    "bench_command",
+    "cells",
+    "embree",
+    "make_config",
+    "metrics",
+    "overhead",
+    "plot",
+    "reference",
+    "report",
+    "rerender",
+    "run_bench",
+    "runner",
+    "scenes",
+    "sweeps",
+    "write_outputs",
+]

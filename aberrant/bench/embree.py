@@ -5,8 +5,8 @@ the same run on the same machine, so a number means something beyond this
 project. The scene is flattened to one triangle mesh in world space *minus
 the camera position* (float64, then float32), and the rays start at the
 origin along ``CameraView.primary_directions`` (float32): the same rays the
-backends trace, camera-relative as the float32 backends work (DESIGN.md
-section 3), so a scene far from the origin is fair to Embree too. No
+backends trace, camera-relative as the float32 backends work (docs/semantics.md,
+"Primary rays"), so a scene far from the origin is fair to Embree too. No
 shading, no back-face culling: ``tfar``, ``primID`` and ``geomID`` only.
 
 embreex's ``run`` holds the GIL, so two threads do not use two cores; the

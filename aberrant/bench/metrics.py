@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-#: Parity thresholds the smoke test holds every supported cell to (issue 9).
+#: Parity thresholds the smoke test holds every supported cell to.
 MISMATCH_MAX_EUCLIDEAN = 1e-3
 MISMATCH_MAX_NON_EUCLIDEAN = 2e-3
 DEPTH_P99_MAX = 1e-3

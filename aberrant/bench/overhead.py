@@ -1,6 +1,6 @@
-"""Engine overhead per tick (issue 10, target 4): every system but the backend's render, 1,000 entities, one moving.
+"""Engine overhead per tick: every system but the backend's render, 1,000 entities, one moving.
 
-The real :class:`~systems.app.App` runs the real systems (camera movement,
+The real :class:`systems.app.App` runs the real systems (camera movement,
 portal teleport, GPU upload into a real backend, the render system) over a
 scene of 1,000 boxes; only the backend's ``render`` is skipped, by a thin
 wrapper that forwards ``upload`` and returns an empty frame. Before each

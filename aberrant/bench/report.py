@@ -1,4 +1,4 @@
-"""``report.md``: the results as tables a reader (and issue 10) can act on.
+"""``report.md``: the results as tables a reader can act on.
 
 Targets first (each measured figure beside its goal), then the headline
 matrix (scene x backend, Mrays/s and the ratio to Embree), the plot, the
@@ -16,7 +16,7 @@ from aberrant.bench.embree import MODES
 from aberrant.bench.sweeps import SWEEPS
 from engine.errors import AberrantError
 
-#: Issue 10's goals: ratio to Embree at 800x800 (family -> minimum), overhead ratios, tick budget.
+#: The goals: ratio to Embree at 800x800 (family -> minimum), overhead ratios, tick budget.
 EMBREE_GOALS: dict[str, float] = {"opencl f32": 1.0, "glsl f32": 0.5}
 TARGET_SCENES: tuple[str, ...] = ("mesh-10k", "mesh-200k")
 TARGET_SIZE: tuple[int, int] = (800, 800)
@@ -126,7 +126,7 @@ def _targets(results: dict[str, Any]) -> list[str]:
                 _mark(ok),
             ]
         )
-    return ["## Issue 10 targets", "", *_table(["target", "measured", "goal", "status"], rows), ""]
+    return ["## Targets", "", *_table(["target", "measured", "goal", "status"], rows), ""]
 
 
 def _headline(results: dict[str, Any]) -> list[str]:

@@ -87,7 +87,10 @@ def make_config(
     overhead: bool = True,
     command: str = "",
 ) -> BenchConfig:
-    """Check every argument before anything runs; a bad one is an :class:`AberrantError` naming the choices."""
+    """Check every argument before anything runs.
+
+    A bad one is an :class:`engine.errors.AberrantError` naming the choices.
+    """
     specs = resolve_scenes(_names(scenes), quick)
     chosen = _names(backends) or list(DEFAULT_BACKENDS)
     for name in chosen:

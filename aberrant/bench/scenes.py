@@ -1,6 +1,6 @@
 """The scenes ``aberrant bench`` measures, and the builders the pytest benchmarks and parity tests share.
 
-One registry (:data:`BENCH_SCENES`) names every scene with how to build it,
+One registry (:func:`bench_scenes`) names every scene with how to build it,
 whether it has a fixed frame size (the watertightness views aim pixel
 centres at mesh vertices and edges, so only their own size tests anything),
 and its group (``bench``, ``demos``, ``hard``, ``overhead``). Builders take a
@@ -171,7 +171,7 @@ def facing_portals(folder: Path) -> Scene:
     return scene
 
 
-# --- non-Euclidean overhead (issue 10): ten boxes seen through deformed space --------------------------------
+# --- non-Euclidean overhead: ten boxes seen through deformed space ------------------------------------------
 
 
 def ten_boxes_aberration(folder: Path) -> Scene:
@@ -207,7 +207,7 @@ class SceneSpec:
     group: str
     size: tuple[int, int] | None = None
     description: str = ""
-    #: The plain scene this one adds deformed space to: its frames alternate with this scene's (issue 10).
+    #: The plain scene this one adds deformed space to: its frames alternate with this scene's.
     baseline: Callable[[Path], Scene] | None = None
 
 

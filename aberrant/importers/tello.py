@@ -1,6 +1,6 @@
 """Import the thesis engine's (TelloEngine's) scene files into our scene format.
 
-Format (``shared/tello/README.md``): JSON followed by one NUL byte; a flat,
+Format (``docs/tello-format.md``; samples in ``tests/data/tello/``): JSON followed by one NUL byte; a flat,
 depth-first list of game objects whose transforms are local to their parent;
 mesh resources are binary files named by uid. What this importer maps, and why:
 
@@ -21,7 +21,7 @@ mesh resources are binary files named by uid. What this importer maps, and why:
 * **Aberrations** use the unit box [-½,½]² × [0, 1] (pivot on its bottom face,
   in local z); ours is the centred cube, so the centre moves by
   ``R (s ⊙ (0, 0, ½))``. Deformation along world axes, ``radial`` with the
-  ``restore`` exit rule (DESIGN.md section 6).
+  ``restore`` exit rule (docs/semantics.md, rules 7-8).
 * **Portals** are the quad [-1, 1]² in local XY facing +Z, exactly ours: no
   conversion; ``connectedGO`` becomes the target's (de-duplicated) name.
 * **Camera** component: the camera's world pose (scale dropped). Without one, a

@@ -1,4 +1,4 @@
-"""TelloEngine's file formats, decoded (``shared/tello/README.md``).
+"""TelloEngine's file formats, decoded (``docs/tello-format.md``).
 
 A scene file is JSON followed by one NUL byte; mesh resources are binary files
 named by uid: four uint32 counts, then vertices, normals, UVs (float32) and

@@ -7,7 +7,7 @@ defines + ``prelude_cl.h`` + the shared ``layout.h`` + ``bindings_cl.h`` + the
 shared tracer files (``shared.TRACER_FILES``) + ``trace.cl`` (concatenated rather than ``#include``d: the
 source is then the whole cache key, and no include path has to survive a
 zipped install). Each variant (scene features, precision, traversal stack) is
-built once per context, its :class:`pyopencl.Kernel` created once and kept:
+built once per context, its ``pyopencl.Kernel`` created once and kept:
 ``program.trace`` would make a new kernel object, and reset its arguments, on
 every access.
 
@@ -131,7 +131,7 @@ def _import_cl() -> Any:
 
 
 def platforms() -> list[cl.Platform]:
-    """Every OpenCL platform, or :class:`BackendUnavailable` naming what to install."""
+    """Every OpenCL platform, or :class:`engine.errors.BackendUnavailable` naming what to install."""
     cl = _import_cl()
     try:
         found = list(cl.get_platforms())

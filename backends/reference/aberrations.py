@@ -1,4 +1,4 @@
-"""Aberration boxes (DESIGN.md section 6, rules in docs/semantics.md), vectorised over rays.
+"""Aberration boxes (docs/semantics.md, "Aberrations" and rules 3-9), vectorised over rays.
 
 One rule per function, so each ports to a kernel function one to one:
 

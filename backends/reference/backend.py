@@ -25,7 +25,7 @@ _INSTANCE_TABLES = ("instances", "materials")
 
 
 class ReferenceBackend(Backend):
-    """Traces every pixel in float64 with NumPy, vectorised over rays (DESIGN.md sections 3–7)."""
+    """Traces every pixel in float64 with NumPy, vectorised over rays (docs/semantics.md)."""
 
     name: ClassVar[str] = "reference"
     precisions: ClassVar[tuple[Precision, ...]] = ("f64",)

@@ -1,6 +1,6 @@
 """Small vector rules shared by aberrations and portals, vectorised over rays (rows).
 
-They exist so that the "no NaN ever" rule of DESIGN.md section 5 is written
+They exist so that the "no NaN ever" rule (docs/semantics.md rule 11) is written
 once: a normalisation that would divide by (almost) zero, or whose input
 overflowed, keeps the previous direction instead of producing NaN or inf.
 """

@@ -1,4 +1,4 @@
-"""Portal quads (DESIGN.md section 7, rules in docs/semantics.md), vectorised over rays.
+"""Portal quads (docs/semantics.md, "Portals" and rules 3 and 10), vectorised over rays.
 
 * :func:`nearest_portal_hits` — the next linked quad a ray passes through;
 * :func:`teleport` — origin and the three directions mapped through ``X``.

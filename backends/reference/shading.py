@@ -1,4 +1,4 @@
-"""Shading (DESIGN.md section 4) of mesh hits, and the colour quantisation every backend shares."""
+"""Shading (docs/semantics.md, "Meshes and shading") of mesh hits, and the colour quantisation every backend shares."""
 
 from __future__ import annotations
 

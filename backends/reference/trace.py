@@ -1,6 +1,6 @@
-"""The ray's journey (DESIGN.md section 5; exact rules in docs/semantics.md), vectorised over rays in float64.
+"""The ray's journey (docs/semantics.md sections 1-13), vectorised over rays in float64.
 
-Every ray carries the full state of section 5 as arrays: origin ``o``, world
+Every ray carries the full state of semantics section 1 as arrays: origin ``o``, world
 direction ``r``, perceived direction ``w``, primary direction ``d0``, the
 active aberration, path length ``L``, perceived length ``Λ``, event count
 ``n`` and the surface it is leaving. Primary rays first take the transition
@@ -31,7 +31,21 @@ from backends.reference.portals import Portals, nearest_portal_hits, teleport
 from backends.reference.shading import ShadingSettings, shade, to_uint8
 from backends.reference.traverse import Geometry, MeshHits, nearest_mesh_hits
 
-__all__ = ["ShadingSettings", "Space", "TraceResult", "to_uint8", "trace"]
+__all__ = [
+    "Event",
+    "RayState",
+    "ShadingSettings",
+    "Space",
+    "TraceResult",
+    "advance",
+    "enter_at_start",
+    "next_event",
+    "nudge_of",
+    "t_min_of",
+    "tie_window",
+    "to_uint8",
+    "trace",
+]
 
 # Event kinds; also the kinds of surface a ray can be leaving (MISS: none).
 MISS, MESH, ABERRATION, PORTAL = 0, 1, 2, 3
@@ -217,7 +231,7 @@ def advance(space: Space, state: RayState, event: Event) -> RayState:
     """Move rays to their box face or portal, add the segment to L and Λ, apply the event; ``n += 1``.
 
     A box face: the ray stays at the face point and is leaving that face. A
-    portal: the ray continues from the target quad (:func:`teleport`) and is
+    portal: the ray continues from the target quad (:func:`backends.reference.portals.teleport`) and is
     leaving it. Either way the active box is then looked up just past the new
     origin along ``r`` and the transition rule updates ``w`` and ``r``.
     """

@@ -1,4 +1,4 @@
-"""The tracer core shared by the GLSL and OpenCL backends (DESIGN.md section 9).
+"""The tracer core shared by the GLSL and OpenCL backends (docs/design.md section 4).
 
 The files here are written once in the common subset of GLSL 4.30 and
 OpenCL C 1.2. A backend assembles a program as::
@@ -55,7 +55,7 @@ def defines_block(defines: Mapping[str, int | float | str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-# --- helpers both fast backends need (added with the OpenCL backend, issue 4) ----------------
+# --- helpers both fast backends need ----------------------------------------------------------
 
 #: The smallest traversal stack compiled; deeper trees get a larger one, in steps of 16.
 MIN_STACK = 32

@@ -1,4 +1,4 @@
-/* core.h -- the tracer core shared by the GLSL and OpenCL backends (DESIGN.md sections 3-5, 9):
+/* core.h -- the tracer core shared by the GLSL and OpenCL backends (docs/design.md section 4):
  * its defines, records and small helpers. The core is this file and those after it, concatenated
  * in this order (backends.shared.TRACER_FILES), each using only what comes before it:
  *   core.h        defines, tolerances, the journey's records, slab tests
@@ -34,8 +34,8 @@
  *               TLAS_NODE(i), TRIANGLE_BLOCK(i) (records, from the bindings file)
  *
  * Compile-time defines (engine.packed.Features.defines() and the backend):
- *   HAS_PORTALS        linked portals exist: portal search and teleport (issue 6)
- *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions (issue 5)
+ *   HAS_PORTALS        linked portals exist: portal search and teleport
+ *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
  *   MAX_EVENTS         events a ray may take (the settings' max_events, which it bounds)
  *   REAL_IS_DOUBLE     trace in double precision
@@ -152,7 +152,7 @@
 /* Faces per box: face id = 6 * row + 2 * axis + (1 on the +1/2 side, 0 on the -1/2 side). */
 #define BOX_FACES 6
 
-/* Event kinds (DESIGN.md section 5). */
+/* Event kinds (docs/semantics.md section 3). */
 #define EVENT_NONE 0
 #define EVENT_MESH 1
 #define EVENT_ABERRATION 2
@@ -160,7 +160,7 @@
 
 /* --- records of the journey ------------------------------------------------------ */
 
-/* The state a ray carries (DESIGN.md section 5, docs/semantics.md section 1). Coordinates are
+/* The state a ray carries (docs/semantics.md section 1). Coordinates are
  * camera-relative. A leg is a straight piece of the journey: o and r change only when the direction
  * does (a bend, a portal), so a box face that leaves r as it is (D = 0, a ray along a metric box's
  * axis) splits nothing: later hits on the leg are found from the same o and come out bit-identical
@@ -213,7 +213,7 @@ STRUCT_BEGIN(ShearedRay)
     int kz;
 STRUCT_END(ShearedRay)
 
-/* What a pixel gets: colour quantised to 0..255 (as floats), the AOVs of DESIGN.md section 5. */
+/* What a pixel gets: colour quantised to 0..255 (as floats), the AOVs (docs/semantics.md, "What a frame holds"). */
 STRUCT_BEGIN(Pixel)
     float4 color;
     float depth;

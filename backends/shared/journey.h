@@ -1,9 +1,9 @@
 /* journey.h -- a pixel's journey: the primary ray, then event after event until it hits a mesh,
- * leaves the scene or runs out of events (DESIGN.md section 5). The kernels' entry point. */
+ * leaves the scene or runs out of events (docs/semantics.md). The kernels' entry point. */
 
-/* --- the journey (DESIGN.md section 5, docs/semantics.md sections 3-13) -------------------------- */
+/* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
-/* The primary ray through pixel (i, j), row 0 = top (DESIGN.md section 3): the camera-space
+/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
  * vector normalised, then rotated (never a difference of two world points). */
 FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
 {

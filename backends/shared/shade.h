@@ -1,6 +1,6 @@
-/* shade.h -- the colour of a mesh hit (DESIGN.md section 4). */
+/* shade.h -- the colour of a mesh hit (docs/semantics.md, "Meshes and shading"). */
 
-/* --- shading (DESIGN.md section 4) ------------------------------------------------------ */
+/* --- shading ------------------------------------------------------------------------- */
 
 /* Checker parity of cell (floor(a/c) + floor(b/c)): true in odd (dark) cells. */
 bool checker_odd(real a, real b, real c)

@@ -1,4 +1,4 @@
-/* space.h -- what bends and teleports rays: aberration boxes and portals (DESIGN.md sections 6-7). */
+/* space.h -- what bends and teleports rays: aberration boxes and portals (docs/semantics.md). */
 
 /* --- vectors of the journey (docs/semantics.md rule 11) ------------------------------------- */
 
@@ -47,7 +47,7 @@ real tie_window(real o_len, real t)
 }
 #endif
 
-/* --- aberrations (DESIGN.md section 6, docs/semantics.md rules 3-9; reference/aberrations.py) --- */
+/* --- aberrations (docs/semantics.md rules 3-9; reference/aberrations.py) ------------------------- */
 
 #if HAS_ABERRATIONS
 /* Entry and exit of a ray through the unit box, built axis by axis (aberrations.slab_faces). */
@@ -286,7 +286,7 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
 }
 #endif
 
-/* --- portals (DESIGN.md section 7, docs/semantics.md rules 3 and 10; reference/portals.py) -------- */
+/* --- portals (docs/semantics.md rules 3 and 10; reference/portals.py) ----------------------------- */
 
 #if HAS_PORTALS
 /* The nearest linked portal quad the ray passes through with t_min < t (portals.nearest_portal_hits):

@@ -2,7 +2,7 @@
 
 The other panels take only the model; these two also read the editor's view
 and play session and trigger its dialogs and play mode. They depend on this
-protocol, not on :class:`~editor.ui.EditorUi`, so the UI imports its panels
+protocol, not on :class:`editor.ui.EditorUi`, so the UI imports its panels
 and no panel imports the UI back.
 """
 

@@ -56,7 +56,7 @@ SCENES: dict[str, Callable[[Path], Scene]] = {
     "mesh-200k": mesh_200k,
 }
 #: The plain scene and its deformed variants (same geometry): the medians' ratios are the price of
-#: the non-Euclidean machinery (issues 5 and 6: aberrations <= 1.3x, portals <= 1.2x wanted).
+#: the non-Euclidean machinery (aberrations <= 1.3x, portals <= 1.2x wanted).
 SPACE_VARIANTS = ("ten-boxes", "ten-boxes-aberration", "ten-boxes-bending", "ten-boxes-portals")
 
 

@@ -1,4 +1,4 @@
-"""Hard aberration cases with rays aimed exactly (issue 5): grazing faces, edges, corners, extreme D, mirrors.
+"""Hard aberration cases with rays aimed exactly: grazing faces, edges, corners, extreme D, mirrors.
 
 An aimed camera (``scenes.aim``: no rotation, a field of view that gives the
 97 x 97 image pixel slopes of k/48) looks at four boxes with integer corners:

@@ -1,4 +1,4 @@
-"""Hard portal cases (issue 6): facing portals, the camera along, on and at the edge of a quad, two portals
+"""Hard portal cases: facing portals, the camera along, on and at the edge of a quad, two portals
 in one tick, and a portal 1e5 from the origin -- rays in every backend and the camera through the systems.
 
 The rules (docs/semantics.md section 3, systems/portal_teleport.py):

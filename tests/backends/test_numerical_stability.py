@@ -1,4 +1,4 @@
-"""Numerical stability on hard cases, in every backend, the reference included (issue 11, part 1).
+"""Numerical stability on hard cases, in every backend, the reference included.
 
 Every case asserts: no NaN (``assert_clean``), termination (a frame comes back;
 endless paths end at ``max_events``), and agreement with the reference within
@@ -49,7 +49,7 @@ scale, not smaller), and (2) a portal less than 1e-5 * max(1, |p|)
 behind it on its own side, as it does standing exactly on the quad -- while
 the next step forward still teleports it. The float64 kernels and the
 reference show neither. Far from the origin float32 loses nothing: the
-tables are camera-relative (DESIGN.md section 3).
+tables are camera-relative (docs/semantics.md, "Primary rays").
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Fast backends against the float64 reference: same scene, same camera, same answers (issues 3 and 4).
+"""Fast backends against the float64 reference: same scene, same camera, same answers.
 
 Every fast backend is listed once in FAST_BACKENDS; each scene is rendered by
 the reference once per module and compared with every backend: instance ids

@@ -1,4 +1,4 @@
-"""Aberrations in the fast backends against the float64 reference (issue 5; docs/semantics.md).
+"""Aberrations in the fast backends against the float64 reference (docs/semantics.md).
 
 The shared core (backends/shared/*.h) ports the reference's rules one by
 one; here GLSL and OpenCL (float32, and OpenCL float64) render scenes with
@@ -163,7 +163,7 @@ def grazing_and_touching() -> Scene:
     return scene
 
 
-#: Hard inputs (issue 5): defined output, no NaN, every backend agreeing with the reference.
+#: Hard inputs: defined output, no NaN, every backend agreeing with the reference.
 HARD: dict[str, Callable[[], Scene]] = {
     "D=-0.99": extreme("D=-0.99", (-0.99, -0.99, -0.99)),
     "D=100": extreme("D=100", (100.0, 100.0, 100.0)),

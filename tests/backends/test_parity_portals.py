@@ -1,4 +1,4 @@
-"""Portals in the fast backends against the float64 reference (issue 6; docs/semantics.md).
+"""Portals in the fast backends against the float64 reference (docs/semantics.md).
 
 Room A is around the origin, room B around x = 100, room D around x = 200:
 closed rooms far enough apart that one is seen from another only through a

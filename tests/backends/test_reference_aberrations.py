@@ -1,6 +1,6 @@
 """Aberrations in the float64 reference tracer: closed forms, rules on single rays, walking, hard inputs.
 
-The rules are those of DESIGN.md section 6 as made precise in docs/semantics.md.
+The rules are those of docs/semantics.md ("Aberrations", rules 3-9).
 Expected values are computed here by hand (independently of the tracer's code).
 """
 

@@ -1,6 +1,6 @@
 """Portals in the float64 reference tracer: doors between rooms, closed forms, chains, hard cases.
 
-The rules are those of DESIGN.md section 7 as made precise in docs/semantics.md.
+The rules are those of docs/semantics.md ("Portals", rules 3 and 10).
 Room A is around the origin, room B around x = 100 (and room D around x = 200):
 far enough apart that nothing of one room is seen from another except
 through a portal.

@@ -1,6 +1,6 @@
-"""What the thesis says the bending modes and exit rules look like, measured on frames (issue 5).
+"""What the thesis says the bending modes and exit rules look like, measured on frames.
 
-"Deforming Space" (seed/deforming-space-thesis.txt) describes, with figures:
+The thesis this project grew from, "Deforming Space", describes, with figures:
 
 * additive ("unidirectional aberration", Figure 27): adding D to the ray direction
   "moves the elements of the scene" -- the view inside the box is the plain view

@@ -1,4 +1,4 @@
-"""``aberrant bench`` (issue 9): metrics on hand-made arrays, the reference cache, arguments, and a quick run.
+"""``aberrant bench``: metrics on hand-made arrays, the reference cache, arguments, and a quick run.
 
 The quick run is the smoke test ``make test`` runs: the report, the results
 and the plot exist and are complete (every scene x backend cell measured or
@@ -188,7 +188,7 @@ def test_quick_run_writes_a_complete_report(quick_run):
             for row in rows:
                 status = row["status"]
                 assert status == "ok" or (status.startswith("unsupported: ") and len(status) > 14), (scene, status)
-    for section in ("## Issue 10 targets", "## Headline", "## Engine overhead", "## Embree anchor", "## What was"):
+    for section in ("## Targets", "## Headline", "## Engine overhead", "## Embree anchor", "## What was"):
         assert section in report
     assert len(results["overhead"]) == len(backends)
     # The mover stays within its fat TLAS leaf: no tick re-uploads tree rows.

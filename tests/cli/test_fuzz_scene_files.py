@@ -1,4 +1,4 @@
-"""Fuzzing scene files (DESIGN.md section 10) and TelloEngine scene files with hypothesis.
+"""Fuzzing scene files (docs/design.md section 8) and TelloEngine scene files with hypothesis.
 
 Hostile or broken input must end in one of two ways: the file loads, or a
 :class:`SceneFileError` (an AberrantError) whose message starts with the
@@ -162,7 +162,7 @@ def transforms(draw: st.DrawFn) -> dict[str, Any]:
 
 @st.composite
 def valid_documents(draw: st.DrawFn) -> dict[str, Any]:
-    """A random scene document that DESIGN.md section 10 says is valid."""
+    """A random scene document that the scene file format (README, "Scene files") says is valid."""
     doc: dict[str, Any] = {"format": "aberrant-scene", "version": 1}
     if draw(st.booleans()):
         doc["name"] = draw(st.text(st.characters(exclude_categories=("Cs",)), max_size=20))

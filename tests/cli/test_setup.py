@@ -24,7 +24,7 @@ def run_make(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
 
 @needs_make
 @pytest.mark.parametrize(
-    "target", ["test", "demo", "bench", "bench-pytest", "gallery", "lint", "clean", "setup", "help"]
+    "target", ["test", "demo", "bench", "bench-pytest", "gallery", "docs", "lint", "clean", "setup", "help"]
 )
 def test_make_targets_parse(target):
     result = run_make("-n", target)

@@ -94,7 +94,7 @@ def test_demo_renders_headless_with_the_reference_backend(demo, backend_factory)
     assert len(np.unique(frame.color.reshape(-1, 4), axis=0)) > 20
 
 
-# --- the showcase levels (issue 7) -------------------------------------------------
+# --- the showcase levels ---------------------------------------------------------
 
 #: The thesis's four levels and the ones beyond it, after the starter.
 SHOWCASE = (

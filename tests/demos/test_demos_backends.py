@@ -1,4 +1,4 @@
-"""Every demo runs 5 ticks headless and renders in every backend with parity to the reference (issue 7).
+"""Every demo runs 5 ticks headless and renders in every backend with parity to the reference.
 
 The imported TelloEngine ``AberrationRoom`` renders in every backend too. Each
 fast backend's frame is compared with the float64 reference on the same scene

@@ -1,4 +1,4 @@
-"""Walking through a portal is seamless (issue 6): the real systems, tick by tick, with a tracer.
+"""Walking through a portal is seamless: the real systems, tick by tick, with a tracer.
 
 Corridor B is an exact copy of corridor A moved by ``X`` (a turn and a
 translation far away), and door B is door A moved by the same ``X``: so

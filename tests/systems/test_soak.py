@@ -1,4 +1,4 @@
-"""Soak (issue 11, part 3): 10,000 headless ticks of a demo through aberrations and portals.
+"""Soak: 10,000 headless ticks of a demo through aberrations and portals.
 
 The demo ``portal_in_aberration`` (an atrium, a hall filled by a metric
 aberration, a garden, two portal pairs) is walked by its own camera path,
