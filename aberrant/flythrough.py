@@ -9,10 +9,10 @@ consecutive frames are merged by Pillow, their time kept), or a folder of
 ``frame_0000.png``... Everything is written to a temporary sibling first and
 renamed at the end, so an interrupted or failed run leaves no partial output.
 
-Where a path comes from: a demo module's optional ``camera_path()``; otherwise
-(scene files, whose format has no paths, and demos without one)
-:func:`default_path`, a slow walk forward from the scene's camera that turns
-its head a little left and back. A demo's path, for example::
+Where a path comes from: a level module's (or demo's) optional ``camera_path()``
+or a scene file's ``camera_path`` keyframes; otherwise :func:`default_path`,
+a slow walk forward from the scene's camera that turns its head a little left
+and back. A demo's path, for example::
 
     def camera_path() -> CameraPath:
         return CameraPath([
@@ -24,7 +24,6 @@ its head a little left and back. A demo's path, for example::
 from __future__ import annotations
 
 import contextlib
-import importlib
 import io
 import math
 import os
@@ -49,6 +48,8 @@ from systems.camera_path import CameraPath, Keyframe
 
 if TYPE_CHECKING:
     from PIL import Image
+
+    from aberrant.levels import Level
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
@@ -260,16 +261,7 @@ def default_path(scene: Scene, duration: float = DEFAULT_DURATION) -> CameraPath
     return CameraPath(keys)
 
 
-def path_for(source: str, scene: Scene) -> CameraPath:
-    """The demo's own ``camera_path()`` when ``source`` names a demo that defines one, else :func:`default_path`."""
-    from demos import DEMOS
-
-    if source in DEMOS and not Path(source).is_file():
-        module = importlib.import_module(DEMOS[source])
-        make = getattr(module, "camera_path", None)
-        if make is not None:
-            path = make()
-            if not isinstance(path, CameraPath):
-                raise AberrantError(f"demo {source!r}: camera_path() returned {type(path).__name__}, not a CameraPath")
-            return path
-    return default_path(scene)
+def path_for(level: Level) -> CameraPath:
+    """The level's own camera path (its ``camera_path()`` or its file's keyframes), else :func:`default_path`."""
+    path = level.camera_path()
+    return path if path is not None else default_path(level.scene)

@@ -22,6 +22,7 @@ import esper
 from components import Aberration, Camera, Mesh, Name, Portal, Transform, ValidationError
 from engine.assets import PRIMITIVES, AssetLibrary, MeshAsset
 from engine.errors import SceneError
+from engine.keyframes import Keyframe
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.settings import Settings
 
@@ -98,6 +99,8 @@ class Scene:
         self.library = library or AssetLibrary()
         self.assets: dict[str, AssetSpec] = {}
         self.camera_entity: int | None = None
+        #: The level's own flythrough (a scene file's ``camera_path``); empty when it has none.
+        self.camera_path: tuple[Keyframe, ...] = ()
         self.world = f"aberrant-scene-{next(_world_ids)}"
         self._settings = settings or Settings()
         self._names: dict[str, int] = {}

@@ -20,7 +20,8 @@ Format, version 1::
       "camera": {"name", "position", "rotation" | "look_at" | "euler_deg", "fov_deg", "speed"},
       "assets": {NAME: {"path": "relative/to/scene.obj"} | {"primitive": "box"}},
       "entities": [{"name", "transform": {"position", "rotation" | "euler_deg", "scale"},
-                    "mesh": {...}, "aberration": {...}, "portal": {...}}]
+                    "mesh": {...}, "aberration": {...}, "portal": {...}}],
+      "camera_path": [{"time", "position", "rotation" | "look_at"}, ...]   (optional: the level's flythrough)
     }
 """
 
@@ -39,6 +40,7 @@ from components.validation import vec3
 from engine.assets import PRIMITIVES
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError
+from engine.keyframes import CameraPathError, Keyframe, checked_keyframes
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.scene import AssetSpec, Scene
 from engine.scene_writer import FORMAT, VERSION, dumps, scene_document, scene_to_json
@@ -56,7 +58,8 @@ __all__ = [
 ]
 
 
-TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities")
+TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities", "camera_path")
+KEYFRAME_KEYS = ("time", "position", "rotation", "look_at")
 SETTINGS_KEYS = ("background", "light_dir", "max_events", "event_limit_color", "ambient")
 CAMERA_KEYS = ("name", "position", "rotation", "look_at", "euler_deg", "fov_deg", "speed")
 ASSET_KEYS = ("path", "primitive")
@@ -254,7 +257,33 @@ class _Reader:
             raise self.fail(f"expected an array of entities, got {_type_name(entities)}", field="entities")
         for index, value in enumerate(entities):
             self.entity(scene, index, value)
+        if "camera_path" in top:
+            scene.camera_path = self.camera_path(top["camera_path"])
         self.check(scene)
+
+    def camera_path(self, value: object) -> tuple[Keyframe, ...]:
+        """The keyframes of ``camera_path``, checked as a camera path checks them (errors name the keyframe)."""
+        if not isinstance(value, list):
+            raise self.fail(f"expected an array of keyframes, got {_type_name(value)}", field="camera_path")
+        keys = []
+        for index, item in enumerate(value):
+            block = self.obj(item, KEYFRAME_KEYS, f"camera_path[{index}]")
+            if "time" not in block or "position" not in block:
+                missing = "time" if "time" not in block else "position"
+                raise self.fail(
+                    "every keyframe needs a 'time' and a 'position'", field=f"camera_path[{index}].{missing}"
+                )
+            if isinstance(block["time"], bool) or not isinstance(block["time"], int | float):
+                raise self.fail(
+                    f"expected a number, got {_type_name(block['time'])}", field=f"camera_path[{index}].time"
+                )
+            keys.append(Keyframe(block["time"], block["position"], block.get("rotation"), block.get("look_at")))
+        try:
+            checked_keyframes(keys)
+        except CameraPathError as e:
+            field = "camera_path" if e.index is None else f"camera_path[{e.index}].{e.field or 'time'}"
+            raise self.fail(e.detail, field=field) from None
+        return tuple(_plain_keyframe(key) for key in keys)
 
     def asset_label(self, name: str) -> str:
         label = f"\0asset:{name}"
@@ -366,6 +395,15 @@ class _Reader:
             scene.asset(name)
         except AberrantError as e:
             raise self.fail(f"asset {name!r}: {e}", entity=entity, field=field) from None
+
+
+def _plain_keyframe(key: Keyframe) -> Keyframe:
+    """A checked keyframe with its vectors as tuples of floats (as read, they are JSON lists)."""
+
+    def floats(value: object) -> tuple[float, ...] | None:
+        return None if value is None else tuple(float(c) for c in value)  # type: ignore[attr-defined]
+
+    return Keyframe(float(key.time), floats(key.position) or (), floats(key.rotation), floats(key.look_at))
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:

@@ -16,6 +16,7 @@ from typing import Any
 
 from components import Aberration, Camera, Mesh, Portal, Transform
 from engine.errors import SceneError
+from engine.keyframes import Keyframe
 from engine.scene import AssetSpec, Scene
 
 FORMAT = "aberrant-scene"
@@ -112,7 +113,20 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
             item["portal"] = {"target": portal.target, "color": _floats(portal.color), "debug_draw": portal.debug_draw}
         entities.append(item)
     doc["entities"] = entities
+    if scene.camera_path:
+        doc["camera_path"] = [_keyframe(key) for key in scene.camera_path]
     return doc
+
+
+def _keyframe(key: Keyframe) -> dict[str, Any]:
+    """One keyframe as the file holds it: its rotation in the form it was given (a quaternion or a point)."""
+    out: dict[str, Any] = {"time": float(key.time), "position": _floats(tuple(key.position))}
+    if key.look_at is not None:
+        out["look_at"] = _floats(tuple(key.look_at))
+    else:
+        assert key.rotation is not None  # a checked keyframe has exactly one of the two
+        out["rotation"] = _floats(tuple(key.rotation))
+    return out
 
 
 def _scalar(value: object) -> str:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import io
-import sys
-import types
 
 import numpy as np
 import pytest
@@ -13,11 +11,11 @@ from PIL import Image
 import aberrant.flythrough as flythrough
 from aberrant.cli import main
 from aberrant.flythrough import default_path, mp4_unavailable, path_for, render_flythrough
+from aberrant.levels import open_level
 from backends.base import create_backend
 from components import Transform
-from demos import DEMOS, build_demo
+from demos import build_demo
 from engine.errors import AberrantError
-from systems.camera_path import CameraPath, Keyframe
 
 SIZE = (48, 36)
 
@@ -146,21 +144,21 @@ def test_bad_outputs_fail_before_rendering(backend, tmp_path):
         fly(backend, tmp_path / "a.gif", frames=0)
 
 
-def test_a_demo_may_define_its_camera_path(monkeypatch):
-    module = types.ModuleType("fake_demo_with_path")
-    module.build = lambda: build_demo("starter")
-    module.camera_path = lambda: CameraPath(
-        [Keyframe(0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(2, (0, 1, 3), look_at=(0, 1, 0))]
+def test_a_level_may_define_its_camera_path(tmp_path):
+    level_file = tmp_path / "level.py"
+    level_file.write_text(
+        "from demos import build_demo\n"
+        "from systems.camera_path import CameraPath, Keyframe\n"
+        "def build():\n    return build_demo('starter')\n"
+        "def camera_path():\n"
+        "    keys = [Keyframe(0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(2, (0, 1, 3), look_at=(0, 1, 0))]\n"
+        "    return CameraPath(keys)\n"
     )
-    monkeypatch.setitem(sys.modules, "fake_demo_with_path", module)
-    monkeypatch.setitem(DEMOS, "fake", "fake_demo_with_path")
-    scene = build_demo("starter")
-    try:
-        assert path_for("fake", scene).duration == 2.0
-        default = path_for("starter", scene)  # no camera_path(): a walk from the scene's camera
-        np.testing.assert_allclose(default.positions[0], scene.get(scene.camera_entity, Transform).position)
-    finally:
-        scene.close()
+    with open_level(str(level_file)) as level:
+        assert path_for(level).duration == 2.0
+    with open_level("starter") as level:  # no camera_path(): a walk from the scene's camera
+        default = path_for(level)
+        np.testing.assert_allclose(default.positions[0], level.scene.get(level.scene.camera_entity, Transform).position)
 
 
 # --- the command line ------------------------------------------------------------------------

@@ -23,7 +23,11 @@ def test_a_scene_that_cannot_be_read_fails_before_a_window_opens(monkeypatch, ca
     err = capsys.readouterr().err
     assert err.startswith("aberrant: error: ") and "missing.json" in err and "not found" in err
     assert main(["editor", "no-such-demo"]) == 2
-    assert "neither a scene file nor a demo" in capsys.readouterr().err
+    assert "neither a scene file (.json), a level module (.py) nor a demo" in capsys.readouterr().err
+    level = tmp_path / "level.py"
+    level.write_text("def build():\n    return None\n")
+    assert main(["editor", f"{level}:build"]) == 2
+    assert "level.py:build() returned NoneType, not a Scene" in capsys.readouterr().err
 
 
 def test_editor_help_lists_the_subcommand(capsys):
