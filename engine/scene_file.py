@@ -8,7 +8,7 @@ missing or empty mesh fails here rather than in the middle of a render.
 
 Saving writes canonical JSON (:mod:`engine.scene_writer`: fixed key order,
 every field spelt out, floats by ``repr`` so they round-trip exactly,
-rotations as quaternions) through :mod:`engine.atomic_files`: a temporary
+rotations as quaternions unless given as ``euler_deg``) through :mod:`engine.atomic_files`: a temporary
 file beside the target, fsynced and renamed over it, so a crash leaves either
 the old file or the new one, never half of one.
 
@@ -321,6 +321,7 @@ class _Reader:
         lens = {k: block[k] for k in ("fov_deg", "speed") if k in block}
         camera = self.component(Camera, lens, "camera", name)
         scene.camera_entity = self.create(scene, name, "camera.name", transform, camera)
+        self.remember_angles(scene, scene.camera_entity, block)
 
     def entity(self, scene: Scene, index: int, value: object) -> None:
         label = f"\0entities[{index}]"
@@ -361,7 +362,15 @@ class _Reader:
             parts.append(
                 self.component(Portal, dict(self.obj(block["portal"], PORTAL_KEYS, "portal", label)), "portal", label)
             )
-        self.create(scene, label, "name", *parts)
+        entity = self.create(scene, label, "name", *parts)
+        self.remember_angles(scene, entity, block.get("transform"))
+
+    @staticmethod
+    def remember_angles(scene: Scene, entity: int, block: object) -> None:
+        """Note that the file gave this rotation as ``euler_deg`` (already validated), so saving writes angles."""
+        if isinstance(block, dict) and "euler_deg" in block:
+            x, y, z = (float(a) for a in block["euler_deg"])
+            scene.euler_deg[entity] = (x, y, z)
 
     def create(self, scene: Scene, name: str, field: str, *components: object) -> int:
         try:
