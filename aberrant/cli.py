@@ -157,8 +157,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     if args.path:
         return cmd_render_path(args)
-    if args.frames is not None or args.fps is not None:
-        raise UsageError("--frames and --fps render a flythrough; add --path")
+    if args.frames is not None or args.fps is not None or args.duration is not None:
+        raise UsageError("--frames, --fps and --duration render a flythrough; add --path")
     width, height = parse_size(args.size)
     out = Path(args.out or "frame.png")
     _check_output("--out", out)
@@ -193,15 +193,12 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_render_path(args: argparse.Namespace) -> int:
     """``render --path``: a flythrough walked by the real systems (aberrant/flythrough.py)."""
-    from aberrant.flythrough import check_output, path_for, render_flythrough
+    from aberrant.flythrough import check_output, path_for, plan_frames, render_flythrough
     from aberrant.levels import open_level
 
     if args.aovs:
         raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
     width, height = parse_size(args.size)
-    frames = 48 if args.frames is None else args.frames
-    if frames < 1:
-        raise UsageError(f"--frames must be at least 1, got {frames}")
     out = Path(args.out or "flythrough.gif")
     check_output(out)
     level = open_level(args.scene)
@@ -209,11 +206,13 @@ def cmd_render_path(args: argparse.Namespace) -> int:
 
     def render(backend: Backend) -> float:
         start = time.perf_counter()
-        render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
+        render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps)
         return time.perf_counter() - start
 
     try:
         path = path_for(level)
+        frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
+        print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps")
         elapsed, backend_name = _with_fallback(args, render)
     finally:
         scene.close()
@@ -332,8 +331,13 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument(
         "--path", action="store_true", help="render a flythrough: the demo's camera_path(), else a walk forward"
     )
-    render.add_argument("--frames", type=int, default=None, help="flythrough frames (default 48)")
-    render.add_argument("--fps", type=float, default=None, help="flythrough frame rate (default: real time)")
+    render.add_argument(
+        "--frames", type=int, default=None, help="flythrough frames (default: the clip's seconds times --fps)"
+    )
+    render.add_argument("--fps", type=float, default=None, help="flythrough frames per second (default 30)")
+    render.add_argument(
+        "--duration", type=float, default=None, metavar="SECONDS", help="flythrough length (default: the path's)"
+    )
     render.set_defaults(func=cmd_render)
 
     tello = sub.add_parser("import-tello", help="convert a TelloEngine (thesis engine) scene file to a scene file")

@@ -10,12 +10,13 @@ from PIL import Image
 
 import aberrant.flythrough as flythrough
 from aberrant.cli import main
-from aberrant.flythrough import default_path, mp4_unavailable, path_for, render_flythrough
+from aberrant.flythrough import default_path, mp4_unavailable, path_for, plan_frames, render_flythrough
 from aberrant.levels import open_level
 from backends.base import create_backend
 from components import Transform
 from demos import build_demo
 from engine.errors import AberrantError
+from systems.camera_path import CameraPath, Keyframe
 
 SIZE = (48, 36)
 
@@ -176,10 +177,37 @@ def test_cli_renders_a_flythrough(backend, tmp_path, capsys):
         assert gif.n_frames == 3
 
 
+def test_frame_count_comes_from_the_paths_duration_at_30_fps():
+    path = CameraPath([Keyframe(0.0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(12.4, (0, 1, 3), look_at=(0, 1, 0))])
+    assert plan_frames(path) == (372, 30.0)
+    assert plan_frames(path, fps=10) == (124, 10)  # the fps changes how often the path is sampled
+    assert plan_frames(path, duration=2.0) == (60, 30.0)  # the whole path, in two seconds
+    assert plan_frames(path, duration=2.0, fps=5) == (10, 5)
+    assert plan_frames(path, frames=32) == (32, 2.5)  # --frames wins; real-time playback
+    assert plan_frames(path, frames=32, fps=8) == (32, 8)
+    for bad in ({"fps": 0}, {"duration": -1.0}, {"duration": float("nan")}, {"frames": 0}):
+        with pytest.raises(AberrantError):
+            plan_frames(path, **bad)
+
+
+def test_cli_samples_the_path_at_fps_for_its_duration(backend, tmp_path, capsys):
+    out = tmp_path / "clip.gif"
+    argv = ["render", "starter", "--path", "--duration", "0.5", "--fps", "8", "--size", "16x12"]
+    code = main([*argv, "--backend", "reference", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "path: 4.0 s, 4 frames at 8 fps" in captured.out  # the starter's default walk lasts 4 s
+    with Image.open(out) as gif:
+        assert gif.n_frames == 4
+        assert abs(gif.info["duration"] - 125) <= 10  # 1/8 s (GIF keeps centiseconds)
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
         (["--frames", "3"], "add --path"),
+        (["--duration", "3"], "add --path"),
+        (["--path", "--duration", "0"], "positive number of seconds"),
         (["--path", "--frames", "0"], "at least 1"),
         (["--path", "--aovs", "x.npz"], "cannot be combined"),
         (["--path", "--out", "clip.png"], ".gif or a folder"),
