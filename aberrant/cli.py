@@ -296,6 +296,7 @@ def cmd_editor(args: argparse.Namespace) -> int:
         from editor.window import EditorUnavailable, display_problem, run_editor
     except ImportError as e:
         raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
+    size = parse_size(args.size) if args.size is not None else None
     problem = display_problem()
     if problem is not None:
         raise UsageError(problem)
@@ -306,7 +307,7 @@ def cmd_editor(args: argparse.Namespace) -> int:
         level = open_level(args.scene)
         model = EditorModel(level.scene, level.file if level.kind == "scene" else None, demo=level.demo or level.label)
     try:
-        return run_editor(model, backend=args.backend)
+        return run_editor(model, backend=args.backend, **({"size": size} if size is not None else {}))
     except EditorUnavailable as e:
         raise UsageError(str(e)) from None
 
@@ -390,6 +391,7 @@ def build_parser() -> argparse.ArgumentParser:
     editor = sub.add_parser("editor", help="open the level editor (play mode included) on a scene file or demo")
     editor.add_argument("scene", metavar="SCENE", nargs="?", default=None, help=LEVEL_HELP)
     editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
+    editor.add_argument("--size", default=None, help="window WIDTHxHEIGHT (default 1600x900; the window is resizable)")
     editor.set_defaults(func=cmd_editor)
     return parser
 
