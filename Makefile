@@ -130,7 +130,7 @@ demo: | apt-packages $(INSTALLED)
 	echo "==> rendering the $(DEMO) demo with the fastest backend here"
 	"$(VENV)/bin/aberrant" render $(DEMO) --backend auto --size 800x600 --out "$(DEMO_OUT)"
 	echo "==> rendering a flythrough (the camera path drives the real systems)"
-	"$(VENV)/bin/aberrant" render $(DEMO) --backend auto --size 320x240 --path --frames 60 --out "$(DEMO_CLIP)"
+	"$(VENV)/bin/aberrant" render $(DEMO) --backend auto --size 320x240 --path --duration 14 --fps 15 --out "$(DEMO_CLIP)"
 	echo "==> image: $(abspath $(DEMO_OUT))"
 	echo "==> flythrough: $(abspath $(DEMO_CLIP))"
 

@@ -28,7 +28,6 @@ from engine.errors import AberrantError
 
 if TYPE_CHECKING:
     from backends.base import Backend, Frame
-    from engine.scene import Scene
 
 PROG = "aberrant"
 #: The largest image side ``render`` accepts (guards against typos like 80000x600).
@@ -37,7 +36,8 @@ MAX_SIDE = 16384
 FALLBACK_BACKEND = "reference"
 #: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
 NPZ_AOVS = ("depth", "perceived", "instance", "events")
-
+#: What a SCENE argument may be (resolved by aberrant/levels.py).
+LEVEL_HELP = "a scene file (.json), a level module (level.py[:func]) or a demo name (see 'aberrant demos')"
 
 T = TypeVar("T")
 
@@ -74,19 +74,6 @@ def _check_output(option: str, path: Path) -> None:
         raise UsageError(f"{option} {path}: is a directory")
     if not os.access(parent, os.W_OK):
         raise UsageError(f"{option} {path}: the directory {str(parent)!r} is not writable")
-
-
-def _load(source: str) -> Scene:
-    """A scene from a scene file path or a demo name."""
-    from demos import DEMOS, build_demo
-    from engine.scene_file import load_scene
-
-    path = Path(source)
-    if path.suffix.lower() == ".json" or path.is_file():
-        return load_scene(path)
-    if source in DEMOS:
-        return build_demo(source)
-    raise UsageError(f"{source!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
 
 
 def _png_bytes(color: np.ndarray) -> bytes:
@@ -163,14 +150,15 @@ def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> 
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    from aberrant.levels import open_level
     from backends.base import AOVS
     from engine.atomic_files import write_atomically
     from systems.app import render_once
 
     if args.path:
         return cmd_render_path(args)
-    if args.frames is not None or args.fps is not None:
-        raise UsageError("--frames and --fps render a flythrough; add --path")
+    if args.frames is not None or args.fps is not None or args.duration is not None:
+        raise UsageError("--frames, --fps and --duration render a flythrough; add --path")
     width, height = parse_size(args.size)
     out = Path(args.out or "frame.png")
     _check_output("--out", out)
@@ -179,7 +167,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         _check_output("--aovs", npz)
         if os.path.abspath(npz) == os.path.abspath(out):
             raise UsageError("--out and --aovs name the same file")
-    scene = _load(args.scene)
+    scene = open_level(args.scene).scene
     aovs = AOVS if npz is not None else ("color",)
 
     def render(backend: Backend) -> tuple[Frame, float]:
@@ -205,25 +193,26 @@ def cmd_render(args: argparse.Namespace) -> int:
 
 def cmd_render_path(args: argparse.Namespace) -> int:
     """``render --path``: a flythrough walked by the real systems (aberrant/flythrough.py)."""
-    from aberrant.flythrough import check_output, path_for, render_flythrough
+    from aberrant.flythrough import check_output, path_for, plan_frames, render_flythrough
+    from aberrant.levels import open_level
 
     if args.aovs:
         raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
     width, height = parse_size(args.size)
-    frames = 48 if args.frames is None else args.frames
-    if frames < 1:
-        raise UsageError(f"--frames must be at least 1, got {frames}")
     out = Path(args.out or "flythrough.gif")
     check_output(out)
-    scene = _load(args.scene)
+    level = open_level(args.scene)
+    scene = level.scene
 
     def render(backend: Backend) -> float:
         start = time.perf_counter()
-        render_flythrough(scene, backend, path, frames, (width, height), out, fps=args.fps)
+        render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps)
         return time.perf_counter() - start
 
     try:
-        path = path_for(args.scene, scene)
+        path = path_for(level)
+        frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
+        print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps")
         elapsed, backend_name = _with_fallback(args, render)
     finally:
         scene.close()
@@ -303,15 +292,24 @@ def cmd_bench(args: argparse.Namespace) -> int:
 def cmd_editor(args: argparse.Namespace) -> int:
     """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
     try:
-        from editor.window import EditorUnavailable, display_problem, load_target, run_editor
+        from editor.model import EditorModel
+        from editor.window import EditorUnavailable, display_problem, run_editor
     except ImportError as e:
         raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
+    size = parse_size(args.size) if args.size is not None else None
     problem = display_problem()
     if problem is not None:
         raise UsageError(problem)
-    model = load_target(args.scene)  # a bad file or name fails here, before a window opens
+    from aberrant.levels import open_level
+
+    model = EditorModel()
+    if args.scene is not None:  # a bad file, module or name fails here, before a window opens
+        level = open_level(args.scene)
+        model = EditorModel(level.scene, level.file if level.kind == "scene" else None, demo=level.demo or level.label)
     try:
-        return run_editor(model, backend=args.backend)
+        if size is None:
+            return run_editor(model, backend=args.backend)
+        return run_editor(model, backend=args.backend, size=size)
     except EditorUnavailable as e:
         raise UsageError(str(e)) from None
 
@@ -321,7 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
     render = sub.add_parser("render", help="render one frame (or, with --path, a flythrough) of a scene or demo")
-    render.add_argument("scene", metavar="SCENE", help="a scene file (.json) or a demo name (see 'aberrant demos')")
+    render.add_argument("scene", metavar="SCENE", help=LEVEL_HELP)
     render.add_argument(
         "--backend", default=None, help="reference, glsl, opencl or auto (default: $ABERRANT_BACKEND or auto)"
     )
@@ -336,8 +334,13 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument(
         "--path", action="store_true", help="render a flythrough: the demo's camera_path(), else a walk forward"
     )
-    render.add_argument("--frames", type=int, default=None, help="flythrough frames (default 48)")
-    render.add_argument("--fps", type=float, default=None, help="flythrough frame rate (default: real time)")
+    render.add_argument(
+        "--frames", type=int, default=None, help="flythrough frames (default: the clip's seconds times --fps)"
+    )
+    render.add_argument("--fps", type=float, default=None, help="flythrough frames per second (default 30)")
+    render.add_argument(
+        "--duration", type=float, default=None, metavar="SECONDS", help="flythrough length (default: the path's)"
+    )
     render.set_defaults(func=cmd_render)
 
     tello = sub.add_parser("import-tello", help="convert a TelloEngine (thesis engine) scene file to a scene file")
@@ -361,7 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SCENE",
-        help="scene names or groups (all, bench, demos, hard, overhead); default all (--quick: a few)",
+        help="scene names or groups (all, bench, demos, hard, overhead), scene files or level.py[:func]; "
+        "default all (--quick: a few)",
     )
     bench.add_argument(
         "--backends", nargs="+", default=None, metavar="BACKEND", help="glsl, opencl, reference (default: glsl opencl)"
@@ -387,8 +391,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(func=cmd_bench)
 
     editor = sub.add_parser("editor", help="open the level editor (play mode included) on a scene file or demo")
-    editor.add_argument("scene", metavar="SCENE|DEMO", nargs="?", default=None, help="a scene file or demo name")
+    editor.add_argument("scene", metavar="SCENE", nargs="?", default=None, help=LEVEL_HELP)
     editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
+    editor.add_argument("--size", default=None, help="window WIDTHxHEIGHT (default 1600x900; the window is resizable)")
     editor.set_defaults(func=cmd_editor)
     return parser
 

@@ -3,16 +3,18 @@
 The first frame shows the path's start; each later tick advances the path by
 ``duration / (frames - 1)`` seconds through :class:`systems.camera_path.PathInput`
 (so aberrations scale the motion and portals teleport the camera) and renders.
+The command line takes 30 frames per second of the clip, and the clip is as
+long as the path unless ``--duration`` says otherwise (:func:`plan_frames`).
 Outputs: ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
 to even by repeating the last row/column), ``.gif`` (Pillow, looping; identical
 consecutive frames are merged by Pillow, their time kept), or a folder of
 ``frame_0000.png``... Everything is written to a temporary sibling first and
 renamed at the end, so an interrupted or failed run leaves no partial output.
 
-Where a path comes from: a demo module's optional ``camera_path()``; otherwise
-(scene files, whose format has no paths, and demos without one)
-:func:`default_path`, a slow walk forward from the scene's camera that turns
-its head a little left and back. A demo's path, for example::
+Where a path comes from: a level module's (or demo's) optional ``camera_path()``
+or a scene file's ``camera_path`` keyframes; otherwise :func:`default_path`,
+a slow walk forward from the scene's camera that turns its head a little left
+and back. A demo's path, for example::
 
     def camera_path() -> CameraPath:
         return CameraPath([
@@ -24,7 +26,6 @@ its head a little left and back. A demo's path, for example::
 from __future__ import annotations
 
 import contextlib
-import importlib
 import io
 import math
 import os
@@ -50,12 +51,40 @@ from systems.camera_path import CameraPath, Keyframe
 if TYPE_CHECKING:
     from PIL import Image
 
+    from aberrant.levels import Level
+
 VIDEO_SUFFIXES = (".mp4", ".gif")
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
 DEFAULT_DURATION = 4.0
 DEFAULT_PACE = 0.3
 #: How far the default path turns its head (degrees).
 DEFAULT_GLANCE_DEG = 15.0
+#: Frames per second of a flythrough when neither ``--fps`` nor ``--frames`` is given.
+DEFAULT_FPS = 30.0
+
+
+def plan_frames(
+    path: CameraPath, *, fps: float | None = None, frames: int | None = None, duration: float | None = None
+) -> tuple[int, float]:
+    """``(frames, fps)`` of a flythrough of ``path``: ``fps`` (default 30) samples of each second of the clip.
+
+    The clip lasts ``duration`` seconds (default: the path's own), so the path
+    is walked at ``path.duration / duration`` times its speed. ``frames``, when
+    given, wins; its fps then defaults to real time (see :func:`render_flythrough`).
+    """
+    if fps is not None and not (math.isfinite(fps) and fps > 0.0):
+        raise AberrantError(f"--fps must be a positive number, got {fps}")
+    if duration is not None and not (math.isfinite(duration) and duration > 0.0):
+        raise AberrantError(f"--duration must be a positive number of seconds, got {duration}")
+    seconds = path.duration if duration is None else duration
+    if frames is None:
+        fps = DEFAULT_FPS if fps is None else fps
+        return max(2, round(seconds * fps)), fps
+    if frames < 1:
+        raise AberrantError(f"--frames must be at least 1, got {frames}")
+    if fps is None:  # the given frames spread over the clip's seconds
+        fps = min(max((frames - 1) / seconds, 1.0), 60.0) if frames > 1 else 1.0
+    return frames, fps
 
 
 def output_kind(out: Path) -> str:
@@ -197,20 +226,16 @@ def render_flythrough(
 ) -> int:
     """Walk ``path`` through ``scene`` with the real systems, rendering ``frames`` frames to ``out``.
 
-    ``fps`` defaults to real time, ``(frames - 1) / path.duration`` (within
-    [1, 60]). ``progress``: True for a bar on stderr, False for none, or a
-    stream. ``on_frame(index, app)`` runs after each tick (tests, overlays). The
+    ``fps`` (playback) defaults to real time, ``(frames - 1) / path.duration``
+    (within [1, 60]); :func:`plan_frames` chooses both from a frame rate.
+    ``progress``: True for a bar on stderr, False for none, or a stream.
+    ``on_frame(index, app)`` runs after each tick (tests, overlays). The
     scene's camera is moved (it ends where the walk ends). Returns the frames written.
     """
-    if frames < 1:
-        raise AberrantError(f"--frames must be at least 1, got {frames}")
+    frames, fps = plan_frames(path, fps=fps, frames=frames)
     out_path = Path(out)
     kind = check_output(out_path)
     dt = path.duration / (frames - 1) if frames > 1 else 0.0
-    if fps is None:
-        fps = min(max((frames - 1) / path.duration, 1.0), 60.0) if frames > 1 else 1.0
-    if not (math.isfinite(fps) and fps > 0.0):
-        raise AberrantError(f"--fps must be a positive number, got {fps}")
     path.place_camera(scene)
     walker = path.inputs(scene)
     sink = _Sink(out_path, kind, fps)
@@ -260,16 +285,7 @@ def default_path(scene: Scene, duration: float = DEFAULT_DURATION) -> CameraPath
     return CameraPath(keys)
 
 
-def path_for(source: str, scene: Scene) -> CameraPath:
-    """The demo's own ``camera_path()`` when ``source`` names a demo that defines one, else :func:`default_path`."""
-    from demos import DEMOS
-
-    if source in DEMOS and not Path(source).is_file():
-        module = importlib.import_module(DEMOS[source])
-        make = getattr(module, "camera_path", None)
-        if make is not None:
-            path = make()
-            if not isinstance(path, CameraPath):
-                raise AberrantError(f"demo {source!r}: camera_path() returned {type(path).__name__}, not a CameraPath")
-            return path
-    return default_path(scene)
+def path_for(level: Level) -> CameraPath:
+    """The level's own camera path (its ``camera_path()`` or its file's keyframes), else :func:`default_path`."""
+    path = level.camera_path()
+    return path if path is not None else default_path(level.scene)

@@ -26,6 +26,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 1
+
 #: The two aberrations, exactly as in the thesis's file (D, centre, size).
 ABERRATIONS = {
     "squeeze_x": ((1.0, 0.0, 0.0), (5.25, 5.5, 0.0), (10.5, 10.0, 27.0)),

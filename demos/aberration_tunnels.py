@@ -27,6 +27,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 2
+
 #: Inside width, height and length of every tunnel, and its wall thickness.
 WIDTH, HEIGHT, LENGTH, WALL = 2.6, 3.0, 10.0, 0.3
 #: name, heading (degrees from -z, + to the right), colour, deformation along the tunnel's own axes

@@ -22,6 +22,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 6
+
 HALF, HEIGHT, WALL = 2.0, 3.2, 0.25
 DOOR = Door(width=2.0, height=2.5)
 #: s = 1 + D: a quarter of the world distance per perceived unit along x and z, the height unchanged.

@@ -18,6 +18,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 5
+
 HALF_WIDTH, HEIGHT, HALF_LENGTH = 2.0, 3.2, 6.0
 #: Portal events before a ray gives up: about 115 units of corridor, a small square of light at the end.
 MAX_EVENTS = 10

@@ -37,6 +37,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 3
+
 HEIGHT = 3.6
 #: Where the hall is, relative to the warm room (the portals map one onto the other by this shift).
 HALL = 40.0

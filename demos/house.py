@@ -43,6 +43,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 4
+
 WALL = 0.3
 DOOR = Door(width=2.0, height=2.5)
 #: Interiors (lo, hi). The rooms lie 60 units under the lawn, where no ray from it reaches.

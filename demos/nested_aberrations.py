@@ -24,6 +24,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 7
+
 ORANGE = (1.0, 0.55, 0.1)
 CYAN = (0.1, 0.8, 0.95)
 MAGENTA = (0.9, 0.2, 0.75)

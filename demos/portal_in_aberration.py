@@ -43,6 +43,9 @@ from engine.settings import Settings
 from systems.camera_path import CameraPath
 from systems.route import Stop, with_scene
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 8
+
 #: The door frames' opening (width, height) and where the three places are.
 OPENING = (2.0, 2.6)
 HALL_X = 50.0

@@ -13,6 +13,9 @@ from pathlib import Path
 from engine.scene import Scene
 from engine.settings import Settings
 
+#: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
+ORDER = 0
+
 #: The imported mesh, found beside this module so the demo works from any working directory.
 KNOT_PATH = Path(__file__).resolve().parent / "assets" / "knot.obj"
 

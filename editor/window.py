@@ -249,7 +249,7 @@ class EditorWindow:
 
 def load_target(target: str | Path | Scene | None) -> EditorModel:
     """The model for ``aberrant editor [SCENE|DEMO]``: a scene file, a demo name, a Scene, or a new scene."""
-    from demos import DEMOS, build_demo
+    from demos import build_demo, demo_names
     from engine.scene import Scene
     from engine.scene_file import load_scene
 
@@ -260,9 +260,10 @@ def load_target(target: str | Path | Scene | None) -> EditorModel:
     path = Path(target)
     if path.suffix.lower() == ".json" or path.is_file():
         return EditorModel(load_scene(path), path)
-    if str(target) in DEMOS:
+    demos = demo_names()
+    if str(target) in demos:
         return EditorModel(build_demo(str(target)), demo=str(target))
-    raise AberrantError(f"{str(target)!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
+    raise AberrantError(f"{str(target)!r} is neither a scene file nor a demo (demos: {', '.join(demos)})")
 
 
 def run_editor(

@@ -22,6 +22,7 @@ import esper
 from components import Aberration, Camera, Mesh, Name, Portal, Transform, ValidationError
 from engine.assets import PRIMITIVES, AssetLibrary, MeshAsset
 from engine.errors import SceneError
+from engine.keyframes import Keyframe
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.settings import Settings
 
@@ -98,6 +99,10 @@ class Scene:
         self.library = library or AssetLibrary()
         self.assets: dict[str, AssetSpec] = {}
         self.camera_entity: int | None = None
+        #: The level's own flythrough (a scene file's ``camera_path``); empty when it has none.
+        self.camera_path: tuple[Keyframe, ...] = ()
+        #: Entity -> the Euler angles (degrees) its rotation was given as, so a saved file keeps angles as angles.
+        self.euler_deg: dict[int, tuple[float, float, float]] = {}
         self.world = f"aberrant-scene-{next(_world_ids)}"
         self._settings = settings or Settings()
         self._names: dict[str, int] = {}
@@ -221,6 +226,7 @@ class Scene:
         self.activate()
         self._names.pop(self.name_of(entity), None)
         esper.delete_entity(entity, immediate=True)
+        self.euler_deg.pop(entity, None)
         if self.camera_entity == entity:
             self.camera_entity = None
         self._record(entity, STRUCTURE)
@@ -297,7 +303,14 @@ class Scene:
         except ValidationError as e:
             raise SceneError(e.message, entity=name, field=f"transform.{e.field}") from None
         parts = [transform] if component is None else [transform, component]
-        return self.create_entity(name, *parts)
+        entity = self.create_entity(name, *parts)
+        self._remember_angles(entity, transform_kwargs.get("euler_deg"))
+        return entity
+
+    def _remember_angles(self, entity: int, euler_deg: Sequence[float] | None) -> None:
+        if euler_deg is not None:
+            x, y, z = (float(a) for a in euler_deg)
+            self.euler_deg[entity] = (x, y, z)
 
     @staticmethod
     def _component(name: str, kind: str, factory: type[C], **fields: Any) -> C:
@@ -419,6 +432,8 @@ class Scene:
                 self.rename(self.camera_entity, name)
         else:
             self.camera_entity = self.create_entity(name, transform, camera)
+        self.euler_deg.pop(self.camera_entity, None)
+        self._remember_angles(self.camera_entity, euler_deg)
         return self.camera_entity
 
     # --- whole-scene checks -------------------------------------------------

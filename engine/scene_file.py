@@ -8,7 +8,7 @@ missing or empty mesh fails here rather than in the middle of a render.
 
 Saving writes canonical JSON (:mod:`engine.scene_writer`: fixed key order,
 every field spelt out, floats by ``repr`` so they round-trip exactly,
-rotations as quaternions) through :mod:`engine.atomic_files`: a temporary
+rotations as quaternions unless given as ``euler_deg``) through :mod:`engine.atomic_files`: a temporary
 file beside the target, fsynced and renamed over it, so a crash leaves either
 the old file or the new one, never half of one.
 
@@ -20,7 +20,8 @@ Format, version 1::
       "camera": {"name", "position", "rotation" | "look_at" | "euler_deg", "fov_deg", "speed"},
       "assets": {NAME: {"path": "relative/to/scene.obj"} | {"primitive": "box"}},
       "entities": [{"name", "transform": {"position", "rotation" | "euler_deg", "scale"},
-                    "mesh": {...}, "aberration": {...}, "portal": {...}}]
+                    "mesh": {...}, "aberration": {...}, "portal": {...}}],
+      "camera_path": [{"time", "position", "rotation" | "look_at"}, ...]   (optional: the level's flythrough)
     }
 """
 
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +40,7 @@ from components.validation import vec3
 from engine.assets import PRIMITIVES
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError
+from engine.keyframes import CameraPathError, Keyframe, checked_keyframes
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.scene import AssetSpec, Scene
 from engine.scene_writer import FORMAT, VERSION, dumps, scene_document, scene_to_json
@@ -56,7 +58,8 @@ __all__ = [
 ]
 
 
-TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities")
+TOP_KEYS = ("format", "version", "name", "settings", "camera", "assets", "entities", "camera_path")
+KEYFRAME_KEYS = ("time", "position", "rotation", "look_at")
 SETTINGS_KEYS = ("background", "light_dir", "max_events", "event_limit_color", "ambient")
 CAMERA_KEYS = ("name", "position", "rotation", "look_at", "euler_deg", "fov_deg", "speed")
 ASSET_KEYS = ("path", "primitive")
@@ -254,7 +257,33 @@ class _Reader:
             raise self.fail(f"expected an array of entities, got {_type_name(entities)}", field="entities")
         for index, value in enumerate(entities):
             self.entity(scene, index, value)
+        if "camera_path" in top:
+            scene.camera_path = self.camera_path(top["camera_path"])
         self.check(scene)
+
+    def camera_path(self, value: object) -> tuple[Keyframe, ...]:
+        """The keyframes of ``camera_path``, checked as a camera path checks them (errors name the keyframe)."""
+        if not isinstance(value, list):
+            raise self.fail(f"expected an array of keyframes, got {_type_name(value)}", field="camera_path")
+        keys = []
+        for index, item in enumerate(value):
+            block = self.obj(item, KEYFRAME_KEYS, f"camera_path[{index}]")
+            if "time" not in block or "position" not in block:
+                missing = "time" if "time" not in block else "position"
+                raise self.fail(
+                    "every keyframe needs a 'time' and a 'position'", field=f"camera_path[{index}].{missing}"
+                )
+            if isinstance(block["time"], bool) or not isinstance(block["time"], int | float):
+                raise self.fail(
+                    f"expected a number, got {_type_name(block['time'])}", field=f"camera_path[{index}].time"
+                )
+            keys.append(Keyframe(block["time"], block["position"], block.get("rotation"), block.get("look_at")))
+        try:
+            checked_keyframes(keys)
+        except CameraPathError as e:
+            field = "camera_path" if e.index is None else f"camera_path[{e.index}].{e.field or 'time'}"
+            raise self.fail(e.detail, field=field) from None
+        return tuple(_plain_keyframe(key) for key in keys)
 
     def asset_label(self, name: str) -> str:
         label = f"\0asset:{name}"
@@ -292,6 +321,7 @@ class _Reader:
         lens = {k: block[k] for k in ("fov_deg", "speed") if k in block}
         camera = self.component(Camera, lens, "camera", name)
         scene.camera_entity = self.create(scene, name, "camera.name", transform, camera)
+        self.remember_angles(scene, scene.camera_entity, block)
 
     def entity(self, scene: Scene, index: int, value: object) -> None:
         label = f"\0entities[{index}]"
@@ -332,7 +362,15 @@ class _Reader:
             parts.append(
                 self.component(Portal, dict(self.obj(block["portal"], PORTAL_KEYS, "portal", label)), "portal", label)
             )
-        self.create(scene, label, "name", *parts)
+        entity = self.create(scene, label, "name", *parts)
+        self.remember_angles(scene, entity, block.get("transform"))
+
+    @staticmethod
+    def remember_angles(scene: Scene, entity: int, block: object) -> None:
+        """Note that the file gave this rotation as ``euler_deg`` (already validated), so saving writes angles."""
+        if isinstance(block, dict) and "euler_deg" in block:
+            x, y, z = (float(a) for a in block["euler_deg"])
+            scene.euler_deg[entity] = (x, y, z)
 
     def create(self, scene: Scene, name: str, field: str, *components: object) -> int:
         try:
@@ -366,6 +404,15 @@ class _Reader:
             scene.asset(name)
         except AberrantError as e:
             raise self.fail(f"asset {name!r}: {e}", entity=entity, field=field) from None
+
+
+def _plain_keyframe(key: Keyframe) -> Keyframe:
+    """A checked keyframe with its vectors as tuples of floats (as read, they are JSON lists)."""
+
+    def floats(value: Iterable[float] | None) -> tuple[float, ...] | None:
+        return None if value is None else tuple(float(c) for c in value)
+
+    return Keyframe(float(key.time), floats(key.position) or (), floats(key.rotation), floats(key.look_at))
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:

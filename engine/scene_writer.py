@@ -1,7 +1,8 @@
 """Scene files, the writing half: a scene as canonical JSON (docs/design.md section 8).
 
 Canonical means fixed key order, every field spelt out, floats by ``repr`` so
-they round-trip exactly and rotations as quaternions: saving a loaded file
+they round-trip exactly, rotations as quaternions unless they were given as
+``euler_deg`` angles (then as those angles): saving a loaded file
 gives the same bytes, and diffs of saved levels show only what changed.
 :mod:`engine.scene_file` reads these documents and saves them atomically.
 """
@@ -16,6 +17,8 @@ from typing import Any
 
 from components import Aberration, Camera, Mesh, Portal, Transform
 from engine.errors import SceneError
+from engine.keyframes import Keyframe
+from engine.maths import quat_from_euler_deg, quat_to_euler_deg
 from engine.scene import AssetSpec, Scene
 
 FORMAT = "aberrant-scene"
@@ -24,6 +27,18 @@ VERSION = 1
 
 def _floats(values: tuple[float, ...]) -> list[float]:
     return [float(v) for v in values]
+
+
+def _rotation(scene: Scene, entity: int, transform: Transform) -> dict[str, list[float]]:
+    """``{"euler_deg": ...}`` when the rotation was given as angles (the same angles while it is unchanged,
+    else the angles of the new rotation to a billionth of a degree), otherwise ``{"rotation": quaternion}``."""
+    angles = scene.euler_deg.get(entity)
+    if angles is None:
+        return {"rotation": _floats(transform.rotation)}
+    if tuple(float(c) for c in quat_from_euler_deg(angles)) != tuple(transform.rotation):
+        x, y, z = (round(float(a), 9) + 0.0 for a in quat_to_euler_deg(transform.rotation))  # + 0.0: no -0.0
+        angles = (x, y, z)
+    return {"euler_deg": _floats(angles)}
 
 
 def _asset_path(scene: Scene, spec: AssetSpec, target_dir: Path) -> str:
@@ -58,7 +73,7 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
         doc["camera"] = {
             "name": scene.name_of(camera_entity),
             "position": _floats(transform.position),
-            "rotation": _floats(transform.rotation),
+            **_rotation(scene, camera_entity, transform),
             "fov_deg": float(camera.fov_deg),
             "speed": float(camera.speed),
         }
@@ -85,7 +100,7 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
             "name": name,
             "transform": {
                 "position": _floats(transform.position),
-                "rotation": _floats(transform.rotation),
+                **_rotation(scene, entity, transform),
                 "scale": _floats(transform.scale),
             },
         }
@@ -112,7 +127,20 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
             item["portal"] = {"target": portal.target, "color": _floats(portal.color), "debug_draw": portal.debug_draw}
         entities.append(item)
     doc["entities"] = entities
+    if scene.camera_path:
+        doc["camera_path"] = [_keyframe(key) for key in scene.camera_path]
     return doc
+
+
+def _keyframe(key: Keyframe) -> dict[str, Any]:
+    """One keyframe as the file holds it: its rotation in the form it was given (a quaternion or a point)."""
+    out: dict[str, Any] = {"time": float(key.time), "position": _floats(tuple(key.position))}
+    if key.look_at is not None:
+        out["look_at"] = _floats(tuple(key.look_at))
+    else:
+        assert key.rotation is not None  # a checked keyframe has exactly one of the two
+        out["rotation"] = _floats(tuple(key.rotation))
+    return out
 
 
 def _scalar(value: object) -> str:

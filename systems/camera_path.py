@@ -30,32 +30,20 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from components import Transform
 from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
-from engine.maths import look_at_quat, quat_conjugate, quat_from_axis_angle, quat_multiply, quat_to_matrix
+from engine.keyframes import CameraPathError, Keyframe, checked_keyframes
+from engine.maths import quat_conjugate, quat_from_axis_angle, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 from systems.camera_movement import PITCH_LIMIT_DEG
 
 Vec3 = tuple[float, float, float]
 
-
-class CameraPathError(AberrantError, ValueError):
-    """A camera path is invalid; the message names the keyframe index and field."""
-
-
-@dataclass(frozen=True)
-class Keyframe:
-    """Where the camera is at ``time`` (seconds): a position and a rotation (x, y, z, w) *or* a point to look at."""
-
-    time: float
-    position: Sequence[float]
-    rotation: Sequence[float] | None = None
-    look_at: Sequence[float] | None = None
+__all__ = ["CameraPath", "CameraPathError", "Keyframe", "PathInput", "yaw_pitch", "yaw_pitch_quat"]
 
 
 def quat_exp(rotvec: np.ndarray) -> np.ndarray:
@@ -95,16 +83,6 @@ def yaw_pitch_quat(yaw_deg: float, pitch_deg: float) -> np.ndarray:
     return quat_multiply(qy, quat_from_axis_angle((1.0, 0.0, 0.0), math.radians(pitch_deg)))
 
 
-def _vector(value: Sequence[float], n: int, index: int, field: str) -> np.ndarray:
-    try:  # a Keyframe is built by callers: its fields may hold anything
-        items = [float(c) for c in value]
-    except (TypeError, ValueError):
-        raise CameraPathError(f"keyframe {index}, field {field!r}: expected {n} numbers, got {value!r}") from None
-    if len(items) != n or not all(math.isfinite(c) for c in items):
-        raise CameraPathError(f"keyframe {index}, field {field!r}: expected {n} finite numbers, got {value!r}")
-    return np.array(items)
-
-
 def _tangents(times: np.ndarray, rates: np.ndarray) -> np.ndarray:
     """Per-keyframe derivatives: time-weighted means of the neighbouring segment rates (chord at the ends).
 
@@ -124,53 +102,11 @@ class CameraPath:
 
     def __init__(self, keyframes: Sequence[Keyframe]) -> None:
         keyframes = list(keyframes)
-        if len(keyframes) < 2:
-            raise CameraPathError(f"a camera path needs at least 2 keyframes, got {len(keyframes)}")
-        times: list[float] = []
-        positions: list[np.ndarray] = []
-        quats: list[np.ndarray] = []
-        for i, key in enumerate(keyframes):
-            if not isinstance(key, Keyframe):
-                raise CameraPathError(f"keyframe {i}: expected a Keyframe, got {type(key).__name__}")
-            try:
-                t = float(key.time)
-            except (TypeError, ValueError):
-                raise CameraPathError(f"keyframe {i}, field 'time': expected a number, got {key.time!r}") from None
-            if not math.isfinite(t):
-                raise CameraPathError(f"keyframe {i}, field 'time': must be finite, got {t}")
-            if times and t <= times[-1]:
-                raise CameraPathError(
-                    f"keyframe {i}, field 'time': times must increase strictly, got {t} after {times[-1]}"
-                )
-            position = _vector(key.position, 3, i, "position")
-            if (key.rotation is None) == (key.look_at is None):
-                raise CameraPathError(f"keyframe {i}, field 'rotation': give exactly one of rotation or look_at")
-            if key.rotation is not None:
-                q = _vector(key.rotation, 4, i, "rotation")
-                if abs(float(np.linalg.norm(q)) - 1.0) > 1e-4:
-                    raise CameraPathError(
-                        f"keyframe {i}, field 'rotation': quaternion (x, y, z, w) must have unit length, "
-                        f"got length {float(np.linalg.norm(q)):.6g}"
-                    )
-                q = quat_normalize_safe(q)
-            else:
-                assert key.look_at is not None  # exactly one of rotation and look_at, checked above
-                target = _vector(key.look_at, 3, i, "look_at")
-                if float(np.linalg.norm(target - position)) < 1e-12:
-                    raise CameraPathError(f"keyframe {i}, field 'look_at': the point looked at equals the position")
-                q = look_at_quat(position, target)
-            if quats and float(np.dot(q, quats[-1])) < 0.0:
-                q = -q  # same rotation, nearer hemisphere: interpolate the short way
-            times.append(t)
-            positions.append(position)
-            quats.append(q)
+        self.times, self.positions, self.quats = checked_keyframes(keyframes)
         self.keyframes = keyframes
-        self.times = np.array(times)
-        self.positions = np.array(positions)
-        self.quats = np.array(quats)
         h = np.diff(self.times)
         self.velocities = _tangents(self.times, np.diff(self.positions, axis=0) / h[:, None])
-        turns = np.array([quat_log(quat_multiply(quat_conjugate(a), b)) for a, b in itertools.pairwise(quats)])
+        turns = np.array([quat_log(quat_multiply(quat_conjugate(a), b)) for a, b in itertools.pairwise(self.quats)])
         self.angular = _tangents(self.times, turns / h[:, None])
 
     @property

@@ -292,14 +292,39 @@ QUICK_SCENES: tuple[str, ...] = (
 )
 
 
+def _level_spec(source: str) -> SceneSpec:
+    """A scene file or level module given on the command line, opened now so a mistake fails before measuring."""
+    from aberrant.levels import open_level
+
+    with open_level(source) as level:
+        label = level.label
+
+    def build(folder: Path) -> Scene:
+        return open_level(source).scene
+
+    return SceneSpec(source, build, "files", description=label)
+
+
+def _is_level_file(name: str) -> bool:
+    from aberrant.levels import split_source
+
+    return split_source(name) is not None or name.lower().endswith(".json") or Path(name).is_file()
+
+
 def resolve_scenes(names: list[str] | None, quick: bool = False) -> list[SceneSpec]:
-    """The specs named (scene names or groups), in registry order; an unknown name is an error naming the choices."""
+    """The specs named (scene names or groups, in registry order; then scene files and level modules, as given).
+
+    An unknown name is an error naming the choices.
+    """
     specs = bench_scenes()
     if not names:
         names = list(QUICK_SCENES) if quick else ["all"]
     chosen: set[str] = set()
+    files: dict[str, SceneSpec] = {}
     for name in names:
-        if name == "all":
+        if name not in specs and name not in GROUPS and _is_level_file(name):
+            files.setdefault(name, _level_spec(name))
+        elif name == "all":
             chosen.update(specs)
         elif name in GROUPS:
             chosen.update(n for n, s in specs.items() if s.group == name)
@@ -307,4 +332,4 @@ def resolve_scenes(names: list[str] | None, quick: bool = False) -> list[SceneSp
             chosen.add(name)
         else:
             raise AberrantError(f"unknown scene {name!r}; choose from {', '.join([*GROUPS, *specs])}")
-    return [spec for name, spec in specs.items() if name in chosen]
+    return [spec for name, spec in specs.items() if name in chosen] + list(files.values())

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import io
-import sys
-import types
 
 import numpy as np
 import pytest
@@ -12,10 +10,11 @@ from PIL import Image
 
 import aberrant.flythrough as flythrough
 from aberrant.cli import main
-from aberrant.flythrough import default_path, mp4_unavailable, path_for, render_flythrough
+from aberrant.flythrough import default_path, mp4_unavailable, path_for, plan_frames, render_flythrough
+from aberrant.levels import open_level
 from backends.base import create_backend
 from components import Transform
-from demos import DEMOS, build_demo
+from demos import build_demo
 from engine.errors import AberrantError
 from systems.camera_path import CameraPath, Keyframe
 
@@ -146,21 +145,21 @@ def test_bad_outputs_fail_before_rendering(backend, tmp_path):
         fly(backend, tmp_path / "a.gif", frames=0)
 
 
-def test_a_demo_may_define_its_camera_path(monkeypatch):
-    module = types.ModuleType("fake_demo_with_path")
-    module.build = lambda: build_demo("starter")
-    module.camera_path = lambda: CameraPath(
-        [Keyframe(0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(2, (0, 1, 3), look_at=(0, 1, 0))]
+def test_a_level_may_define_its_camera_path(tmp_path):
+    level_file = tmp_path / "level.py"
+    level_file.write_text(
+        "from demos import build_demo\n"
+        "from systems.camera_path import CameraPath, Keyframe\n"
+        "def build():\n    return build_demo('starter')\n"
+        "def camera_path():\n"
+        "    keys = [Keyframe(0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(2, (0, 1, 3), look_at=(0, 1, 0))]\n"
+        "    return CameraPath(keys)\n"
     )
-    monkeypatch.setitem(sys.modules, "fake_demo_with_path", module)
-    monkeypatch.setitem(DEMOS, "fake", "fake_demo_with_path")
-    scene = build_demo("starter")
-    try:
-        assert path_for("fake", scene).duration == 2.0
-        default = path_for("starter", scene)  # no camera_path(): a walk from the scene's camera
-        np.testing.assert_allclose(default.positions[0], scene.get(scene.camera_entity, Transform).position)
-    finally:
-        scene.close()
+    with open_level(str(level_file)) as level:
+        assert path_for(level).duration == 2.0
+    with open_level("starter") as level:  # no camera_path(): a walk from the scene's camera
+        default = path_for(level)
+        np.testing.assert_allclose(default.positions[0], level.scene.get(level.scene.camera_entity, Transform).position)
 
 
 # --- the command line ------------------------------------------------------------------------
@@ -178,10 +177,37 @@ def test_cli_renders_a_flythrough(backend, tmp_path, capsys):
         assert gif.n_frames == 3
 
 
+def test_frame_count_comes_from_the_paths_duration_at_30_fps():
+    path = CameraPath([Keyframe(0.0, (0, 1, 5), look_at=(0, 1, 0)), Keyframe(12.4, (0, 1, 3), look_at=(0, 1, 0))])
+    assert plan_frames(path) == (372, 30.0)
+    assert plan_frames(path, fps=10) == (124, 10)  # the fps changes how often the path is sampled
+    assert plan_frames(path, duration=2.0) == (60, 30.0)  # the whole path, in two seconds
+    assert plan_frames(path, duration=2.0, fps=5) == (10, 5)
+    assert plan_frames(path, frames=32) == (32, 2.5)  # --frames wins; real-time playback
+    assert plan_frames(path, frames=32, fps=8) == (32, 8)
+    for bad in ({"fps": 0}, {"duration": -1.0}, {"duration": float("nan")}, {"frames": 0}):
+        with pytest.raises(AberrantError):
+            plan_frames(path, **bad)
+
+
+def test_cli_samples_the_path_at_fps_for_its_duration(backend, tmp_path, capsys):
+    out = tmp_path / "clip.gif"
+    argv = ["render", "starter", "--path", "--duration", "0.5", "--fps", "8", "--size", "16x12"]
+    code = main([*argv, "--backend", "reference", "--out", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert "path: 4.0 s, 4 frames at 8 fps" in captured.out  # the starter's default walk lasts 4 s
+    with Image.open(out) as gif:
+        assert gif.n_frames == 4
+        assert abs(gif.info["duration"] - 125) <= 10  # 1/8 s (GIF keeps centiseconds)
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [
         (["--frames", "3"], "add --path"),
+        (["--duration", "3"], "add --path"),
+        (["--path", "--duration", "0"], "positive number of seconds"),
         (["--path", "--frames", "0"], "at least 1"),
         (["--path", "--aovs", "x.npz"], "cannot be combined"),
         (["--path", "--out", "clip.png"], ".gif or a folder"),

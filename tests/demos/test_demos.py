@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 import pytest
 
-from demos import DEMOS, build_demo, demo_names, describe
+from aberrant.levels import open_level
+from demos import build_demo, demo_module, demo_modules, demo_names, describe
 from engine.errors import AberrantError
 from engine.scene import Scene
 from engine.scene_file import load_scene, save_scene
 
 SIZE = (64, 48)
+
+
+DEMOS = demo_modules()
 
 
 @pytest.fixture(params=sorted(DEMOS))
@@ -28,7 +30,7 @@ def test_registry_lists_every_demo_module():
 
 
 def test_demo_module_has_a_description_and_build(demo):
-    module = importlib.import_module(DEMOS[demo])
+    module = demo_module(demo)
     assert callable(module.build)
     description = describe(demo)
     assert description and "\n" not in description
@@ -191,9 +193,10 @@ def _walk(demo: str, dt: float, ticks: int | None = None) -> tuple[object, list[
     from components import Transform
     from systems.app import App
 
-    scene = build_demo(demo)
+    level = open_level(demo)
+    scene = level.scene
     try:
-        path = path_for(demo, scene)
+        path = path_for(level)
         path.place_camera(scene)
         crossings: list[str] = []
         with App(scene, None, input_source=path.inputs(scene)) as app:
@@ -211,7 +214,7 @@ def _walk(demo: str, dt: float, ticks: int | None = None) -> tuple[object, list[
 def test_every_camera_path_is_valid_and_runs(demo):
     from systems.camera_path import CameraPath
 
-    module = importlib.import_module(DEMOS[demo])
+    module = demo_module(demo)
     if not hasattr(module, "camera_path"):
         pytest.skip("no camera path: the flythrough uses the default walk")
     path = module.camera_path()
@@ -224,7 +227,7 @@ def test_every_camera_path_is_valid_and_runs(demo):
 @pytest.mark.parametrize("demo_name", SHOWCASE)
 def test_flythrough_walks_through_its_portals_and_ends_where_designed(demo_name):
     """The route's premise: the systems replay the path in perceived units and end at the last stop."""
-    module = importlib.import_module(DEMOS[demo_name])
+    module = demo_module(demo_name)
     stops = module.stops()
     _, crossings, end = _walk(demo_name, 0.05)
     assert crossings == [s.via for s in stops if s.via is not None]
@@ -236,9 +239,10 @@ def test_a_few_flythrough_ticks_render(backend_factory):
     from aberrant.flythrough import path_for
     from systems.app import App
 
-    scene = build_demo("portal_in_aberration")
+    level = open_level("portal_in_aberration")
+    scene = level.scene
     try:
-        path = path_for("portal_in_aberration", scene)
+        path = path_for(level)
         path.place_camera(scene)
         with App(scene, backend_factory("reference"), size=SIZE, input_source=path.inputs(scene)) as app:
             for _ in range(3):

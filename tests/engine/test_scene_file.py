@@ -109,8 +109,12 @@ def test_saved_file_is_canonical_json(tmp_path):
     assert [e["name"] for e in doc["entities"]] == [
         "floor", "knot", "ball", "metric", "radial", "additive", "door_a", "door_b", "one_way", "inert", "marker",
     ]  # fmt: skip
-    assert "euler_deg" not in text and "look_at" not in text  # rotations are always quaternions
-    assert all(len(e["transform"]["rotation"]) == 4 for e in doc["entities"])
+    assert "look_at" not in text  # a point looked at is saved as the rotation it gave
+    for e in doc["entities"]:  # angles given as angles stay angles, the rest are quaternions
+        given = "euler_deg" if "euler_deg" in e["transform"] else "rotation"
+        assert len(e["transform"][given]) == (3 if given == "euler_deg" else 4)
+        assert ("rotation" in e["transform"]) != ("euler_deg" in e["transform"])
+    assert "euler_deg" in text
     assert '\n  "settings": {\n    "background": [0.1, 0.2, 0.30000000000000004],' in text
     assert text.endswith("}\n")
     assert text == scene_to_json(scene, tmp_path)
