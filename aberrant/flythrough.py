@@ -3,11 +3,12 @@
 The first frame shows the path's start; each later tick advances the path by
 ``duration / (frames - 1)`` seconds through :class:`~systems.camera_path.PathInput`
 (so aberrations scale the motion and portals teleport the camera) and renders.
-Outputs: ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
-to even by repeating the last row/column), ``.gif`` (Pillow, looping; identical
-consecutive frames are merged by Pillow, their time kept), or a folder of
-``frame_0000.png``... Everything is written to a temporary sibling first and
-renamed at the end, so an interrupted or failed run leaves no partial output.
+Outputs (:mod:`aberrant.sinks`): ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg's
+ffmpeg; odd sizes are padded to even by repeating the last row/column), ``.gif``
+(Pillow, looping; identical consecutive frames are merged by Pillow, their time
+kept), or a folder of ``frame_0000.png``... Everything is written to a temporary
+sibling first and renamed at the end, so an interrupted or failed run leaves no
+partial output.
 
 Where a path comes from: a demo module's optional ``camera_path()``; otherwise
 (scene files, whose format has no paths, and demos without one)
@@ -23,13 +24,9 @@ its head a little left and back. A demo's path, for example::
 
 from __future__ import annotations
 
-import contextlib
 import importlib
-import io
 import math
 import os
-import secrets
-import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -37,138 +34,24 @@ from typing import TextIO
 
 import numpy as np
 
+from aberrant.progress import Progress
+from aberrant.sinks import Sink, check_fps, check_gif_memory, check_output
 from backends.base import Backend
 from components import Camera, Transform
-from systems.app import App
-from systems.camera_path import CameraPath, Keyframe
 from engine.errors import AberrantError
 from engine.input import NoInput
 from engine.maths import quat_from_axis_angle, quat_multiply, quat_to_matrix
-from aberrant.progress import Progress
 from engine.scene import Scene
+from systems.app import App
+from systems.camera_path import CameraPath, Keyframe
 
-VIDEO_SUFFIXES = (".mp4", ".gif")
+__all__ = ["check_output", "default_path", "path_for", "render_flythrough"]
+
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
 DEFAULT_DURATION = 4.0
 DEFAULT_PACE = 0.3
 #: How far the default path turns its head (degrees).
 DEFAULT_GLANCE_DEG = 15.0
-
-
-def output_kind(out: Path) -> str:
-    """``"mp4"``, ``"gif"`` or ``"png"`` (a folder) from the output path."""
-    suffix = out.suffix.lower()
-    if suffix in VIDEO_SUFFIXES:
-        return suffix[1:]
-    if suffix in (".png", ".jpg", ".jpeg", ".webm", ".avi", ".mov", ".mkv"):
-        raise AberrantError(f"--out {out}: a flythrough is written as .mp4, .gif or a folder of PNGs (no suffix)")
-    return "png"
-
-
-def check_output(out: Path) -> str:
-    """Fail before rendering when ``out`` cannot be written; returns its kind."""
-    kind = output_kind(out)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise AberrantError(f"--out {out}: the directory {str(parent)!r} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise AberrantError(f"--out {out}: the directory {str(parent)!r} is not writable")
-    if kind != "png" and out.is_dir():
-        raise AberrantError(f"--out {out}: is a directory")
-    if kind == "png" and out.exists():
-        if not out.is_dir():
-            raise AberrantError(f"--out {out}: exists and is not a folder (PNG frames are written into a folder)")
-        stray = [p.name for p in out.iterdir() if not (p.name.startswith("frame_") and p.suffix == ".png")]
-        if stray:
-            raise AberrantError(f"--out {out}: the folder holds other files ({stray[0]}...); choose an empty folder")
-    if kind == "mp4":
-        reason = mp4_unavailable()
-        if reason is not None:
-            raise AberrantError(f"--out {out}: cannot write .mp4: {reason}; write a .gif or a folder instead")
-    return kind
-
-
-def mp4_unavailable() -> str | None:
-    """``None`` when .mp4 can be written here, else why not."""
-    try:
-        import imageio_ffmpeg
-    except ImportError:
-        return "imageio-ffmpeg is not installed (pip install imageio-ffmpeg)"
-    try:
-        imageio_ffmpeg.get_ffmpeg_exe()
-    except RuntimeError as e:
-        return f"imageio-ffmpeg finds no ffmpeg executable ({e})"
-    return None
-
-
-def _even(rgb: np.ndarray) -> np.ndarray:
-    """Pad to even width and height by repeating the last row/column (yuv420p needs even sides)."""
-    h, w = rgb.shape[:2]
-    return np.pad(rgb, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") if h % 2 or w % 2 else rgb
-
-
-class _Sink:
-    """Frames in, one output out: written to a temporary sibling, renamed by :meth:`commit`."""
-
-    def __init__(self, out: Path, kind: str, fps: float) -> None:
-        self.out, self.kind, self.fps = out, kind, fps
-        self.tmp = out.with_name(f".{out.name}.{secrets.token_hex(4)}.tmp{out.suffix}")
-        self.frames: list[object] = []
-        self.count = 0
-        self.writer: object = None
-        if kind == "png":
-            self.tmp.mkdir()
-
-    def add(self, rgb: np.ndarray) -> None:
-        from PIL import Image
-
-        if self.kind == "png":
-            Image.fromarray(rgb).save(self.tmp / f"frame_{self.count:04d}.png")
-        elif self.kind == "gif":
-            self.frames.append(Image.fromarray(rgb))
-        else:
-            frame = _even(rgb)
-            if self.writer is None:
-                import imageio_ffmpeg
-
-                self.writer = imageio_ffmpeg.write_frames(
-                    str(self.tmp), (frame.shape[1], frame.shape[0]), fps=self.fps, codec="libx264",
-                    pix_fmt_in="rgb24", pix_fmt_out="yuv420p", macro_block_size=2, quality=8,
-                    ffmpeg_log_level="error",
-                )  # fmt: skip
-                self.writer.send(None)  # type: ignore[attr-defined]
-            self.writer.send(np.ascontiguousarray(frame))  # type: ignore[attr-defined]
-        self.count += 1
-
-    def commit(self) -> None:
-        if self.kind == "gif":
-            buffer = io.BytesIO()
-            first, *rest = self.frames
-            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))  # type: ignore[attr-defined]
-            with open(self.tmp, "wb") as f:
-                f.write(buffer.getvalue())
-                f.flush()
-                os.fsync(f.fileno())
-        elif self.kind == "mp4":
-            self.writer.close()  # type: ignore[attr-defined]
-            self.writer = None
-        if self.kind == "png" and self.out.is_dir():
-            old = self.out.with_name(f".{self.out.name}.{secrets.token_hex(4)}.old")
-            os.rename(self.out, old)  # an earlier run's frames: swap, then remove
-            os.rename(self.tmp, self.out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(self.tmp, self.out)
-
-    def discard(self) -> None:
-        if self.writer is not None:
-            with contextlib.suppress(Exception):
-                self.writer.close()  # type: ignore[attr-defined]
-        if self.tmp.is_dir():
-            shutil.rmtree(self.tmp, ignore_errors=True)
-        else:
-            with contextlib.suppress(OSError):
-                os.unlink(self.tmp)
 
 
 def render_flythrough(
@@ -197,11 +80,12 @@ def render_flythrough(
     dt = path.duration / (frames - 1) if frames > 1 else 0.0
     if fps is None:
         fps = min(max((frames - 1) / path.duration, 1.0), 60.0) if frames > 1 else 1.0
-    if not (math.isfinite(fps) and fps > 0.0):
-        raise AberrantError(f"--fps must be a positive number, got {fps}")
+    check_fps(fps)
+    if kind == "gif":
+        check_gif_memory(frames, (int(size[0]), int(size[1])))
     path.place_camera(scene)
     walker = path.inputs(scene)
-    sink = _Sink(out_path, kind, fps)
+    sink = Sink(out_path, kind, fps)
     stream = sys.stderr if progress is True else (progress or None)
     bar = None if stream is None else Progress(frames, stream, interval_s=2.0, label="flythrough", unit="frames")
     try:
