@@ -17,8 +17,8 @@ as float64) where the device has ``cl_khr_fp64``.
 
 from __future__ import annotations
 
-import contextlib
 import os
+import sys
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -27,6 +27,8 @@ import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
+from backends.opencl import cache
+from backends.opencl.cache import configure_caches
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -87,24 +89,6 @@ GPU_LOCAL_SIZE: tuple[int, int] = (8, 8)
 
 
 # --- caches and devices -------------------------------------------------------------------
-
-
-def configure_caches() -> str | None:
-    """Point PoCL's kernel cache at ``$ABERRANT_CACHE_DIR/opencl`` (so CI runs are repeatable).
-
-    Must run before PoCL is first initialised (the first platform query of the
-    process); a user's own ``POCL_CACHE_DIR`` wins. Returns the directory for
-    pyopencl's compiler cache (which has no environment variable: it is passed
-    to each build), or ``None`` to keep pyopencl's default.
-    """
-    root = os.environ.get("ABERRANT_CACHE_DIR")
-    if not root:
-        return None
-    base = os.path.join(root, "opencl")
-    pocl = os.environ.setdefault("POCL_CACHE_DIR", os.path.join(base, "pocl"))
-    with contextlib.suppress(OSError):  # an unwritable cache costs rebuilds, never a failure
-        os.makedirs(pocl, exist_ok=True)
-    return os.path.join(base, "pyopencl")
 
 
 #: PoCL settings the backend applies when the user has not set them (read once, at PoCL's init).
@@ -206,6 +190,10 @@ def pocl_version(platform: cl.Platform) -> str | None:
     return None
 
 
+def _first_line(text: str) -> str:
+    return next((line.strip() for line in text.splitlines() if line.strip()), "")
+
+
 # --- the backend -------------------------------------------------------------------------
 
 
@@ -264,6 +252,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._kernels: dict[tuple[tuple[str, int], ...], cl.Kernel] = {}
         #: Arguments last set on each kernel (by id of the kernel): re-set only what changed.
         self._bound: dict[int, list[object]] = {}
+        #: Kernels (and work-group shapes) whose cache files were recorded as good after a frame.
+        self._recorded: set[tuple[int, tuple[int, int] | None]] = set()
         #: How many program variants this backend has built (tests check the cache).
         self.compile_count = 0
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
@@ -393,16 +383,31 @@ class OpenClBackend(shared.UploadedScene, Backend):
         key = (*sorted(defines.items()), *((option, 1) for option in self.build_options))
         kernel = self._kernels.get(key)
         if kernel is None:
-            cl = self._cl
-            program = cl.Program(self._context(), self.source(defines))
-            try:
-                program = program.build(options=list(self.build_options), cache_dir=self._cache_dir)
-            except cl.Error as e:  # its message carries the build log
-                raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
-            kernel = cl.Kernel(program, "trace")
+            kernel = self._build(self.source(defines))
             self._kernels[key] = kernel
             self.compile_count += 1
         return kernel
+
+    def _build(self, source: str) -> cl.Kernel:
+        """Build one program; a failure that came from a cached entry removes that entry and tries once more."""
+        cl = self._cl
+        for attempt in (1, 2):
+            started = time.time() - 1.0  # file times are coarse on some file systems
+            try:
+                program = cl.Program(self._context(), source).build(
+                    options=list(self.build_options), cache_dir=self._cache_dir
+                )
+                return cl.Kernel(program, "trace")
+            except cl.Error as e:  # its message carries the build log
+                removed = cache.forget_touched(cache.pocl_cache_dir(), started) if attempt == 1 else []
+                if not removed:
+                    raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
+                print(
+                    f"aberrant: warning: the OpenCL kernel did not build from its cache entry {removed[0]} "
+                    f"({_first_line(str(e))}); removed it, rebuilding",
+                    file=sys.stderr,
+                )
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def _bind(self, kernel: cl.Kernel, args: list[object]) -> None:
         """Set the kernel arguments that differ from what it holds (each set costs a driver call)."""
@@ -449,6 +454,9 @@ class OpenClBackend(shared.UploadedScene, Backend):
         cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
         queue.finish()
         traced = time.perf_counter()
+        if (id(kernel), self.local_size) not in self._recorded:  # PoCL wrote this shape's code: it ran, record it
+            self._recorded.add((id(kernel), self.local_size))
+            cache.record(cache.pocl_cache_dir())
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = _OUTPUT_DTYPES[name]
