@@ -302,7 +302,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from aberrant.bench import bench_command, make_config, rerender
 
     if args.from_results:
-        for path in rerender(Path(args.from_results), Path(args.out)):
+        try:
+            written = rerender(Path(args.from_results), Path(args.out))
+        except RecursionError:  # json's decoder recurses once per level of nesting
+            raise UsageError(
+                f"--from-results {shorten(args.from_results)}: nested too deeply to be a results.json"
+            ) from None
+        for path in written:
             print(f"wrote {path}")
         return 0
     config = make_config(

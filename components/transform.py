@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from components.validation import Quat, ValidationError, Vec3, unit_quaternion, vec3
+from components.validation import Quat, ValidationError, Vec3, at_most, unit_quaternion, vec3
 
 
 @dataclass(frozen=True)
@@ -28,4 +28,5 @@ class Transform:
                 raise ValidationError(
                     f"scale[{i}]", "a scale component of zero collapses the entity; use a small non-zero value"
                 )
+            at_most(s, f"scale[{i}]", "a scale")
         object.__setattr__(self, "scale", scale)

@@ -40,6 +40,22 @@ def real(value: object, field: str) -> float:
     return result
 
 
+#: The largest scale component, camera speed and world-space size of a mesh the tracers take: sizes and
+#: distances then stay far inside float32's range (3.4e38; depths are float32, and so are the fast
+#: backends' tables) and their squares inside float64's. Beyond it a box's float32 inverse scale
+#: rounds to 0 and distances overflow to infinity.
+MAX_MAGNITUDE = 1e30
+
+
+def at_most(value: float, field: str, what: str) -> float:
+    """``value`` when ``|value| <= MAX_MAGNITUDE``, else a :class:`ValidationError` saying why there is a limit."""
+    if abs(value) > MAX_MAGNITUDE:
+        raise ValidationError(
+            field, f"{what} beyond {MAX_MAGNITUDE:g} overflows the tracers' float32 ranges, got {value:g}"
+        )
+    return value
+
+
 def vector(value: object, n: int, field: str) -> tuple[float, ...]:
     if isinstance(value, str | bytes) or (not isinstance(value, Sequence) and not hasattr(value, "__len__")):
         raise ValidationError(field, f"expected {n} numbers, got {type(value).__name__} {value!r}")
