@@ -86,11 +86,15 @@ def _load(source: str) -> Scene:
     from engine.scene_file import load_scene
 
     path = Path(source)
-    if path.suffix.lower() == ".json" or path.is_file():
+    try:
+        is_file = path.is_file()
+    except OSError:  # a name too long to be a path, say
+        is_file = False
+    if path.suffix.lower() == ".json" or is_file:
         return load_scene(path)
     if source in DEMOS:
         return build_demo(source)
-    raise UsageError(f"{source!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
+    raise UsageError(f"{shorten(source)!r} is neither a scene file nor a demo (demos: {', '.join(DEMOS)})")
 
 
 def _png_bytes(color: np.ndarray) -> bytes:

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -430,8 +430,14 @@ def _unencodable_string(doc: object) -> str | None:
     return None
 
 
-def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
-    """Write ``scene`` to ``path`` atomically; raises :class:`SceneFileError` (old file intact) on failure."""
+def save_scene(
+    scene: Scene, path: str | os.PathLike[str], *, with_files: Mapping[str | os.PathLike[str], bytes] | None = None
+) -> None:
+    """Write ``scene`` to ``path`` atomically; raises :class:`SceneFileError` (old file intact) on failure.
+
+    ``with_files`` (an importer's meshes) are written in the same atomic write:
+    all of them and the scene, or, when one cannot be written, none of them.
+    """
     file = str(path)
     target_dir = Path(os.path.abspath(path)).parent
     try:
@@ -445,8 +451,8 @@ def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
     except UnicodeEncodeError as e:
         raise SceneFileError(file, f"cannot save: a name holds text that is not valid Unicode ({e.reason})") from None
     try:
-        write_atomically({path: data})
+        write_atomically({**(with_files or {}), path: data})
     except OSError as e:
         if not target_dir.is_dir():
             raise SceneFileError(file, f"cannot save: the folder {str(target_dir)!r} does not exist") from e
-        raise SceneFileError(file, f"cannot save ({e.strerror or e})") from e
+        raise SceneFileError(shorten(e.filename or file), f"cannot save ({e.strerror or e})") from e
