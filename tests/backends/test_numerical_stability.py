@@ -19,8 +19,11 @@ digits shown)::
     boxes at 1e3 / 1e5 / 1e6               0 %, 9e-8 / <= 6e-7               0 %, 0 / 0
     aberrations at 1e3 / 1e5 / 1e6         0 %, 7e-8 / <= 4e-7               0 %, 0 / 0
     portals at 1e3 / 1e5 / 1e6             0 %, <= 1.3e-7 / <= 8e-7          0 %, 0 / 0
-      (the reference itself at 1e6 against the origin: 0.029 % on the aberration scene -- its
-       float64 t_min, 1e-9 |o|, is 1e-3 there -- 0 % on the others)
+    all three at 1e9 / 1e10 / 1e12     the reference against the fast backends there: as above;
+      the reference against the origin: 0 % / 0 % / <= 0.014 % (at 1e12 the scene's own float64
+      positions are 1.2e-4 apart; every backend moves the same pixels). The reference traces
+      camera-relative like the fast backends: in world coordinates its t_min (1e-9 |o|) was 10
+      units at 1e10, and it hit 0.1 % of pixels there, none at 1e12
     every scene scaled 1e-2, 1e2, 1e4      0 %, 8e-8 / <= 4e-7               0 %, 0 / 1.2e-7 (float32 AOV)
     scaled 1e-3                            <= 0.072 %, p99 <= 1.9e-6         0 %
     scaled 1e-4: boxes                     0 %                               0 %
@@ -66,6 +69,7 @@ from scenes import (
     EVERY,
     F32_DEPTH_MEDIAN_MAX,
     F64_DEPTH_P99_MAX,
+    FAST,
     MISMATCH_MAX,
     ReferenceFrames,
     aberration_boxes,
@@ -81,9 +85,9 @@ from test_parity import assert_clean, compare, random_boxes
 from test_parity_aberrations import mixed_overlap, room
 from test_parity_portals import portal_in_aberrations, rooms
 
+from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from backends.base import Frame
 from components import Transform
-from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 
@@ -305,6 +309,45 @@ def test_far_from_the_origin(backend_factory, origin_frames, backend_name, preci
     backend = backend_factory(backend_name, precision)
     frame = render_scene(backend, lambda: translated(FAR_SCENES[case](), OFFSETS[offset]), SIZE)
     assert_as_at_the_origin(frame, origin_frames(case), precision)
+
+
+#: Far enough that the reference's tolerances (relative to |o|) used to swallow the scene in world coordinates.
+FAR_OFFSETS = {f"{m:.0e}": (m * 1.0000037, -m * 0.9999961, m * 1.00000173) for m in (1e9, 1e10, 1e12)}
+
+
+@pytest.fixture(scope="module")
+def far_reference_frames() -> Iterator[ReferenceFrames]:
+    """The reference's frame of each scene moved by each of :data:`FAR_OFFSETS`."""
+    builders = {
+        f"{case}@{offset}": (lambda case=case, offset=offset: translated(FAR_SCENES[case](), FAR_OFFSETS[offset]))
+        for case in FAR_SCENES
+        for offset in FAR_OFFSETS
+    }
+    frames = ReferenceFrames(builders, SIZE)
+    yield frames
+    frames.release()
+
+
+@pytest.mark.parametrize("offset", list(FAR_OFFSETS))
+@pytest.mark.parametrize("case", list(FAR_SCENES))
+def test_the_reference_far_from_the_origin_is_the_frame_at_the_origin(
+    origin_frames, far_reference_frames, case, offset
+):
+    """It traces camera-relative, as the fast backends do: 1e10 away it used to hit 0.1 % of pixels, 1e12 none.
+    (At 1e12 the scene file's own float64 positions are 1.2e-4 apart: a few edge pixels move, in every backend.)"""
+    result = compare(far_reference_frames(f"{case}@{offset}"), origin_frames(case))
+    assert result.mismatch <= MISMATCH_MAX, result
+
+
+@pytest.mark.parametrize("offset", list(FAR_OFFSETS))
+@pytest.mark.parametrize("case", list(FAR_SCENES))
+@pytest.mark.parametrize(("backend_name", "precision"), FAST)
+def test_far_from_the_origin_the_fast_backends_agree_with_the_reference(
+    backend_factory, far_reference_frames, backend_name, precision, case, offset
+):
+    backend = backend_factory(backend_name, precision)
+    frame = render_scene(backend, lambda: translated(FAR_SCENES[case](), FAR_OFFSETS[offset]), SIZE)
+    assert_as_at_the_origin(frame, far_reference_frames(f"{case}@{offset}"), precision)
 
 
 # --- object scales -------------------------------------------------------------------------------------------------
