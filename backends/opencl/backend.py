@@ -17,6 +17,7 @@ as float64) where the device has ``cl_khr_fp64``.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 import time
@@ -240,7 +241,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self.local_size: tuple[int, int] | None = (
             None if local_size is None else (int(local_size[0]), int(local_size[1]))  # type: ignore[index]
         )
-        self._ctx: cl.Context | None = cl.Context([self.device])
+        self._ctx: cl.Context | None = cache.shared_context(self.device)
         self._queue = cl.CommandQueue(self._ctx)
         self._tables: dict[str, cl.Buffer] = {}
         self._forget_upload()
@@ -252,8 +253,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._kernels: dict[tuple[tuple[str, int], ...], cl.Kernel] = {}
         #: Arguments last set on each kernel (by id of the kernel): re-set only what changed.
         self._bound: dict[int, list[object]] = {}
-        #: Kernels (and work-group shapes) whose cache files were recorded as good after a frame.
-        self._recorded: set[tuple[int, tuple[int, int] | None]] = set()
+        #: The program (source hash, options) of each kernel (by id), to give it back on release.
+        self._program_keys: dict[int, tuple[str, tuple[str, ...]]] = {}
         #: How many program variants this backend has built (tests check the cache).
         self.compile_count = 0
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
@@ -389,15 +390,23 @@ class OpenClBackend(shared.UploadedScene, Backend):
         return kernel
 
     def _build(self, source: str) -> cl.Kernel:
+        """This backend's kernel object of a program built once per context (:func:`cache.kept_program`)."""
+        context = self._context()
+        key = (hashlib.sha256(source.encode()).hexdigest(), tuple(self.build_options))
+        program = cache.kept_program(context, key, lambda: self._build_program(source))
+        kernel = cache.take_kernel(context, key, lambda: self._cl.Kernel(program, "trace"))
+        self._program_keys[id(kernel)] = key
+        return kernel
+
+    def _build_program(self, source: str) -> cl.Program:
         """Build one program; a failure that came from a cached entry removes that entry and tries once more."""
         cl = self._cl
         for attempt in (1, 2):
             started = time.time() - 1.0  # file times are coarse on some file systems
             try:
-                program = cl.Program(self._context(), source).build(
+                return cl.Program(self._context(), source).build(
                     options=list(self.build_options), cache_dir=self._cache_dir
                 )
-                return cl.Kernel(program, "trace")
             except cl.Error as e:  # its message carries the build log
                 removed = cache.forget_touched(cache.pocl_cache_dir(), started) if attempt == 1 else []
                 if not removed:
@@ -454,9 +463,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
         queue.finish()
         traced = time.perf_counter()
-        if (id(kernel), self.local_size) not in self._recorded:  # PoCL wrote this shape's code: it ran, record it
-            self._recorded.add((id(kernel), self.local_size))
-            cache.record(cache.pocl_cache_dir())
+        cache.record_once(cache.pocl_cache_dir(), (self._program_keys[id(kernel)], self.local_size))
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = _OUTPUT_DTYPES[name]
@@ -473,7 +480,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
     # --- teardown -----------------------------------------------------------------------
 
     def release(self) -> None:
-        """Free buffers, kernels and the context; idempotent."""
+        """Free buffers, kernels and the queue; idempotent. The device's context and the programs built in
+        it stay for the next backend (:func:`cache.shared_context`)."""
         if self._ctx is None:
             return
         self._queue.finish()
@@ -481,7 +489,10 @@ class OpenClBackend(shared.UploadedScene, Backend):
             buffer.release()
         self._tables.clear()
         self._outputs.clear()
+        cache.give_back_kernels(self._ctx, [(self._program_keys[id(k)], k) for k in self._kernels.values()])
         self._kernels.clear()
+        self._program_keys.clear()
         self._bound.clear()
+        self._camera_row = None
         self._ctx = None
         self._uploaded = False

@@ -29,7 +29,10 @@ import struct
 import sys
 import tempfile
 import time
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Iterable
 from pathlib import Path
+from typing import Any
 
 from engine.atomic_files import write_atomically
 
@@ -103,6 +106,65 @@ def pocl_cache_dir() -> str:
         return explicit
     home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return os.path.join(home, "pocl", "kcache")
+
+
+# --- in this process ----------------------------------------------------------------------------
+
+#: Programs kept built, per context, most recently used last. Building a program, even from PoCL's
+#: cache, leaves about 12 KB of PoCL's memory behind each time (bare contexts leave none): a process
+#: that creates and releases backends (the editor switching, tests) reuses these instead.
+PROGRAMS_KEPT = 32
+_contexts: dict[int, Any] = {}
+_programs: OrderedDict[tuple[int, Hashable], Any] = OrderedDict()
+
+
+def shared_context(device: Any) -> Any:
+    """The one context of ``device`` in this process (every backend on it shares it, and its programs)."""
+    import pyopencl as cl
+
+    key = device.int_ptr
+    context = _contexts.get(key)
+    if context is None:
+        context = _contexts[key] = cl.Context([device])
+    return context
+
+
+#: Kernel objects a released backend gave back, per program (creating one leaves ~1.7 KB of PoCL's
+#: memory behind): at most this many per program wait for the next backend.
+KERNELS_KEPT = 4
+_free_kernels: dict[tuple[int, Hashable], list[Any]] = {}
+
+
+def kept_program(context: Any, key: Hashable, build: Callable[[], Any]) -> Any:
+    """The program ``key`` built in ``context``: kept from an earlier ``build()``, or built now and kept."""
+    full = (context.int_ptr, key)
+    program = _programs.get(full)
+    if program is None:
+        program = _programs[full] = build()
+        while len(_programs) > PROGRAMS_KEPT:
+            evicted, _ = _programs.popitem(last=False)
+            _free_kernels.pop(evicted, None)
+    _programs.move_to_end(full)
+    return program
+
+
+def take_kernel(context: Any, key: Hashable, make: Callable[[], Any]) -> Any:
+    """A kernel of program ``key`` for one backend's sole use: one given back earlier, or ``make()``'s.
+
+    A kernel keeps the arguments its last user set: the taker sets every argument before its first launch.
+    """
+    free = _free_kernels.get((context.int_ptr, key))
+    return free.pop() if free else make()
+
+
+def give_back_kernels(context: Any, kernels: Iterable[tuple[Hashable, Any]]) -> None:
+    """Kernels of a released backend, ``(program key, kernel)``, kept for the next one (while their program is)."""
+    for key, kernel in kernels:
+        full = (context.int_ptr, key)
+        if full in _programs:
+            free = _free_kernels.setdefault(full, [])
+            if len(free) < KERNELS_KEPT:
+                free.append(kernel)
 
 
 # --- whole files -------------------------------------------------------------------------------
@@ -275,6 +337,17 @@ def record(root: str | os.PathLike[str]) -> None:
                     known[name] = hashlib.sha256(path.read_bytes()).hexdigest()
         with contextlib.suppress(OSError):
             write_atomically({entry / RECORD: json.dumps(known, indent=0, sort_keys=True).encode()})
+
+
+_recorded: set[Hashable] = set()
+
+
+def record_once(root: str | os.PathLike[str], ran: Hashable) -> None:
+    """:func:`record` after the first frame of each program and work-group shape ``ran`` in this process
+    (PoCL writes a shape's code when it first runs: that frame is what proves the files good)."""
+    if ran not in _recorded:
+        _recorded.add(ran)
+        record(root)
 
 
 def forget_touched(root: str | os.PathLike[str], since: float) -> list[Path]:

@@ -88,6 +88,7 @@ from test_parity_portals import portal_in_aberrations, rooms
 from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from backends.base import Frame
 from components import Transform
+from components.validation import MAX_MAGNITUDE
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 
@@ -397,6 +398,31 @@ def test_object_scales(backend_factory, origin_frames, backend_name, precision, 
         assert result.depth_p99 <= 3e-7, result  # the scaled float32 depth AOV itself rounds to ~1e-7
     else:
         assert result.depth_median <= F32_DEPTH_MEDIAN_MAX, result
+
+
+def at_the_size_limit(kind: str) -> Scene:
+    """A ball on a floor, and a box (a mesh around everything, or an aberration) scaled by MAX_MAGNITUDE."""
+    scene = Scene(f"{kind} at the limit")
+    scene.add_mesh("floor", "plane", scale=(10.0, 1.0, 10.0))
+    scene.add_mesh("ball", "sphere", position=(0.5, 1.0, 0.0))
+    if kind == "mesh":
+        scene.add_mesh("huge", "box", position=(0.0, 1.0, -3.0), scale=MAX_MAGNITUDE)
+    else:
+        scene.add_aberration("huge", (1.0, 0.0, 0.0), position=(0.0, 1.0, 0.0), scale=(MAX_MAGNITUDE, 1.0, 1.0))
+    scene.set_camera((0.0, 1.5, 5.0), look_at=(0.0, 1.0, 0.0))
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["mesh", "aberration"])
+@pytest.mark.parametrize(("backend_name", "precision"), FAST)
+def test_sizes_up_to_the_validation_limit_agree_with_the_reference(
+    backend_factory, reference, backend_name, precision, kind
+):
+    """Scales are refused beyond MAX_MAGNITUDE (1e36); up to it every backend renders what the reference does."""
+    frame = render_scene(backend_factory(backend_name, precision), lambda: at_the_size_limit(kind), SIZE)
+    assert_clean(frame)
+    truth = reference(f"limit-{kind}", lambda: at_the_size_limit(kind), SIZE)
+    assert compare(frame, truth).mismatch <= MISMATCH_MAX
 
 
 # --- a portal at the camera ----------------------------------------------------------------------------------------
