@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, NoReturn, TypeVar
 
 import numpy as np
 
-from engine.errors import AberrantError
+from aberrant.signals import Terminated, terminations_raise
+from engine.errors import QUOTE_LIMIT, AberrantError, shorten
 
 if TYPE_CHECKING:
     from backends.base import Backend, Frame
@@ -66,14 +67,17 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def _check_output(option: str, path: Path) -> None:
-    """Fail before rendering when ``path`` cannot be written (so no render time is wasted)."""
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise UsageError(f"{option} {path}: the directory {str(parent)!r} does not exist")
-    if path.is_dir():
-        raise UsageError(f"{option} {path}: is a directory")
-    if not os.access(parent, os.W_OK):
-        raise UsageError(f"{option} {path}: the directory {str(parent)!r} is not writable")
+    """Fail before rendering when ``path`` cannot be written (so no render time is wasted).
+
+    What is already there must be a writable regular file, or a symlink to one
+    (written through); a device, FIFO, socket or folder is refused, never replaced.
+    """
+    from engine.atomic_files import UnsafeTarget, check_writable
+
+    try:
+        check_writable(path)
+    except UnsafeTarget as e:
+        raise UsageError(f"{option} {shorten(path)}: {e.strerror}") from None
 
 
 def _png_bytes(color: np.ndarray) -> bytes:
@@ -118,24 +122,34 @@ def _raised_by_backend(error: BaseException, backend: Backend) -> bool:
 
 
 def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> tuple[T, str]:
-    """``render(backend)`` on the chosen backend, falling back to the reference when it fails while rendering.
+    """``render(backend)`` on the chosen backend; with ``auto``, falling back to the reference when it fails.
 
-    Choosing a backend already falls back when one cannot start (it says why);
-    a fast backend can still fail on its first frame, when its kernel is
-    built: a driver that cannot compile it, a scene feature it does not
-    trace. The scene itself is fine (it loaded), so the reference, which
-    traces everything, renders it instead, after a one-line message saying
-    which backend failed and the compiler's first errors.
+    A backend named with ``--backend`` (or ``$ABERRANT_BACKEND``) is what runs,
+    or the command fails with its real reason: it never quietly renders with
+    another. ``auto`` (the default) picks the fastest backend that starts here,
+    and a fast backend can still fail on its first frame, when its kernel is
+    built: a driver that cannot compile it, a scene feature it does not trace.
+    The scene itself is fine (it loaded), so the reference, which traces
+    everything, renders it instead, after a one-line message saying which
+    backend failed and the compiler's first errors.
     """
-    from backends.base import create_backend
+    from backends.base import create_backend, default_backend_name
+    from engine.errors import BackendUnavailable
 
-    backend = create_backend(args.backend, precision=args.precision, fallback=True)
+    name = args.backend or default_backend_name()
+    named = name != "auto"
+    try:
+        backend = create_backend(name, precision=args.precision, fallback=not named)
+    except BackendUnavailable as e:
+        raise BackendUnavailable(f"{_brief(str(e))}; --backend auto picks one that can") from None
     try:
         return render(backend), backend.name
     except AberrantError as e:
         if backend.name == FALLBACK_BACKEND or not _raised_by_backend(e, backend):
             raise
         failure = _brief(str(e))
+        if named:
+            raise BackendUnavailable(f"{failure}; --backend auto falls back to one that can") from None
     finally:
         backend.release()
     print(
@@ -278,7 +292,13 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from aberrant.bench import bench_command, make_config, rerender
 
     if args.from_results:
-        for path in rerender(Path(args.from_results), Path(args.out)):
+        try:
+            written = rerender(Path(args.from_results), Path(args.out))
+        except RecursionError:  # json's decoder recurses once per level of nesting
+            raise UsageError(
+                f"--from-results {shorten(args.from_results)}: nested too deeply to be a results.json"
+            ) from None
+        for path in written:
             print(f"wrote {path}")
         return 0
     config = make_config(
@@ -398,8 +418,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: The longest error line printed: one overlong word (a quoted 200 MB name) is cut to its start first.
+MAX_LINE = 1000
+
+
 def _one_line(text: str) -> str:
-    return " ".join(str(text).split())
+    """``text`` on one line, each overlong word shortened and the whole at most :data:`MAX_LINE` characters."""
+    line = " ".join(shorten(word, QUOTE_LIMIT) for word in str(text).split())
+    return line if len(line) <= MAX_LINE else shorten(line, MAX_LINE)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -411,7 +437,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(e.code or 0) if not isinstance(e.code, str) else 2
     args.argv = list(sys.argv[1:] if argv is None else argv)
     try:
-        with warnings.catch_warnings():
+        with terminations_raise(), warnings.catch_warnings():
             # numpy's "overflow encountered in ..." from extreme (but valid) scene values says nothing a user
             # can act on; the tracers keep NaN and inf out of the image, so keep stderr for real messages.
             warnings.filterwarnings("ignore", message=r".* encountered in ", category=RuntimeWarning)
@@ -420,12 +446,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {_one_line(str(e))}", file=sys.stderr)
         return 2
     except OSError as e:
-        where = f"{e.filename}: " if e.filename else ""
+        where = f"{shorten(e.filename)}: " if e.filename else ""
         print(f"{PROG}: error: {where}{_one_line(e.strerror or str(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except Terminated as e:  # SIGTERM, SIGHUP: cleaned up like Ctrl-C; the status a killed process would have
+        print(f"{PROG}: terminated ({e})", file=sys.stderr)
+        return 128 + e.signum
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ The first frame shows the path's start; each later tick advances the path by
 (so aberrations scale the motion and portals teleport the camera) and renders.
 The command line takes 30 frames per second of the clip, and the clip is as
 long as the path unless ``--duration`` says otherwise (:func:`plan_frames`).
-Outputs: ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
+Outputs (:mod:`aberrant.sinks`): ``.mp4`` (H.264, yuv420p, through imageio-ffmpeg; odd sizes are padded
 to even by repeating the last row/column), ``.gif`` (Pillow, looping; identical
 consecutive frames are merged by Pillow, their time kept), or a folder of
 ``frame_0000.png``... Everything is written to a temporary sibling first and
@@ -25,20 +25,17 @@ and back. A demo's path, for example::
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import os
-import secrets
-import shutil
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol, TextIO
+from typing import TYPE_CHECKING, TextIO
 
 import numpy as np
 
 from aberrant.progress import Progress
+from aberrant.sinks import Sink, check_fps, check_gif_memory, check_output
 from backends.base import Backend
 from components import Camera, Transform
 from engine.errors import AberrantError
@@ -49,11 +46,10 @@ from systems.app import App
 from systems.camera_path import CameraPath, Keyframe
 
 if TYPE_CHECKING:
-    from PIL import Image
-
     from aberrant.levels import Level
 
-VIDEO_SUFFIXES = (".mp4", ".gif")
+__all__ = ["check_output", "default_path", "path_for", "plan_frames", "render_flythrough"]
+
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
 DEFAULT_DURATION = 4.0
 DEFAULT_PACE = 0.3
@@ -72,8 +68,8 @@ def plan_frames(
     is walked at ``path.duration / duration`` times its speed. ``frames``, when
     given, wins; its fps then defaults to real time (see :func:`render_flythrough`).
     """
-    if fps is not None and not (math.isfinite(fps) and fps > 0.0):
-        raise AberrantError(f"--fps must be a positive number, got {fps}")
+    if fps is not None:
+        check_fps(fps)
     if duration is not None and not (math.isfinite(duration) and duration > 0.0):
         raise AberrantError(f"--duration must be a positive number of seconds, got {duration}")
     seconds = path.duration if duration is None else duration
@@ -85,131 +81,6 @@ def plan_frames(
     if fps is None:  # the given frames spread over the clip's seconds
         fps = min(max((frames - 1) / seconds, 1.0), 60.0) if frames > 1 else 1.0
     return frames, fps
-
-
-def output_kind(out: Path) -> str:
-    """``"mp4"``, ``"gif"`` or ``"png"`` (a folder) from the output path."""
-    suffix = out.suffix.lower()
-    if suffix in VIDEO_SUFFIXES:
-        return suffix[1:]
-    if suffix in (".png", ".jpg", ".jpeg", ".webm", ".avi", ".mov", ".mkv"):
-        raise AberrantError(f"--out {out}: a flythrough is written as .mp4, .gif or a folder of PNGs (no suffix)")
-    return "png"
-
-
-def check_output(out: Path) -> str:
-    """Fail before rendering when ``out`` cannot be written; returns its kind."""
-    kind = output_kind(out)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise AberrantError(f"--out {out}: the directory {str(parent)!r} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise AberrantError(f"--out {out}: the directory {str(parent)!r} is not writable")
-    if kind != "png" and out.is_dir():
-        raise AberrantError(f"--out {out}: is a directory")
-    if kind == "png" and out.exists():
-        if not out.is_dir():
-            raise AberrantError(f"--out {out}: exists and is not a folder (PNG frames are written into a folder)")
-        stray = [p.name for p in out.iterdir() if not (p.name.startswith("frame_") and p.suffix == ".png")]
-        if stray:
-            raise AberrantError(f"--out {out}: the folder holds other files ({stray[0]}...); choose an empty folder")
-    if kind == "mp4":
-        reason = mp4_unavailable()
-        if reason is not None:
-            raise AberrantError(f"--out {out}: cannot write .mp4: {reason}; write a .gif or a folder instead")
-    return kind
-
-
-def mp4_unavailable() -> str | None:
-    """``None`` when .mp4 can be written here, else why not."""
-    try:
-        import imageio_ffmpeg
-    except ImportError:
-        return "imageio-ffmpeg is not installed (pip install imageio-ffmpeg)"
-    try:
-        imageio_ffmpeg.get_ffmpeg_exe()
-    except RuntimeError as e:
-        return f"imageio-ffmpeg finds no ffmpeg executable ({e})"
-    return None
-
-
-def _even(rgb: np.ndarray) -> np.ndarray:
-    """Pad to even width and height by repeating the last row/column (yuv420p needs even sides)."""
-    h, w = rgb.shape[:2]
-    return np.pad(rgb, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge") if h % 2 or w % 2 else rgb
-
-
-class _FrameWriter(Protocol):
-    """What ``imageio_ffmpeg.write_frames`` returns: a generator, primed with ``send(None)``, then fed frames."""
-
-    def send(self, frame: np.ndarray | None, /) -> None: ...
-
-    def close(self) -> None: ...
-
-
-class _Sink:
-    """Frames in, one output out: written to a temporary sibling, renamed by :meth:`commit`."""
-
-    def __init__(self, out: Path, kind: str, fps: float) -> None:
-        self.out, self.kind, self.fps = out, kind, fps
-        self.tmp = out.with_name(f".{out.name}.{secrets.token_hex(4)}.tmp{out.suffix}")
-        self.frames: list[Image.Image] = []
-        self.count = 0
-        self.writer: _FrameWriter | None = None
-        if kind == "png":
-            self.tmp.mkdir()
-
-    def add(self, rgb: np.ndarray) -> None:
-        from PIL import Image
-
-        if self.kind == "png":
-            Image.fromarray(rgb).save(self.tmp / f"frame_{self.count:04d}.png")
-        elif self.kind == "gif":
-            self.frames.append(Image.fromarray(rgb))
-        else:
-            frame = _even(rgb)
-            if self.writer is None:
-                import imageio_ffmpeg
-
-                self.writer = imageio_ffmpeg.write_frames(
-                    str(self.tmp), (frame.shape[1], frame.shape[0]), fps=self.fps, codec="libx264",
-                    pix_fmt_in="rgb24", pix_fmt_out="yuv420p", macro_block_size=2, quality=8,
-                    ffmpeg_log_level="error",
-                )  # fmt: skip
-                self.writer.send(None)
-            self.writer.send(np.ascontiguousarray(frame))
-        self.count += 1
-
-    def commit(self) -> None:
-        if self.kind == "gif":
-            buffer = io.BytesIO()
-            first, *rest = self.frames
-            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))
-            with open(self.tmp, "wb") as f:
-                f.write(buffer.getvalue())
-                f.flush()
-                os.fsync(f.fileno())
-        elif self.kind == "mp4":
-            assert self.writer is not None  # the first frame started it
-            self.writer.close()
-            self.writer = None
-        if self.kind == "png" and self.out.is_dir():
-            old = self.out.with_name(f".{self.out.name}.{secrets.token_hex(4)}.old")
-            os.rename(self.out, old)  # an earlier run's frames: swap, then remove
-            os.rename(self.tmp, self.out)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(self.tmp, self.out)
-
-    def discard(self) -> None:
-        if self.writer is not None:
-            with contextlib.suppress(Exception):
-                self.writer.close()
-        if self.tmp.is_dir():
-            shutil.rmtree(self.tmp, ignore_errors=True)
-        else:
-            with contextlib.suppress(OSError):
-                os.unlink(self.tmp)
 
 
 def render_flythrough(
@@ -236,9 +107,12 @@ def render_flythrough(
     out_path = Path(out)
     kind = check_output(out_path)
     dt = path.duration / (frames - 1) if frames > 1 else 0.0
+    check_fps(fps)
+    if kind == "gif":
+        check_gif_memory(frames, (int(size[0]), int(size[1])))
     path.place_camera(scene)
     walker = path.inputs(scene)
-    sink = _Sink(out_path, kind, fps)
+    sink = Sink(out_path, kind, fps)
     stream = sys.stderr if progress is True else (progress or None)
     bar = None if stream is None else Progress(frames, stream, interval_s=2.0, label="flythrough", unit="frames")
     try:

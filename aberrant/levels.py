@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType, TracebackType
 
-from engine.errors import AberrantError
+from engine.errors import AberrantError, shorten
 from engine.scene import Scene
 from systems.camera_path import CameraPath
 
@@ -102,15 +102,20 @@ def open_level(source: str | Path) -> Level:
     if code is not None:
         return _open_module(*code)
     path = Path(text)
-    if path.suffix.lower() == ".json" or path.is_file():
-        return Level(load_scene(path), str(path), "scene", file=path)
+    try:
+        is_file = path.is_file()
+    except OSError:  # a name too long to be a path, say
+        is_file = False
+    if path.suffix.lower() == ".json" or is_file:
+        return Level(load_scene(path), shorten(path), "scene", file=path)
     modules = demo_modules()
     if text in modules:
         module = demo_module(text)
         scene = module.build()
         return Level(scene, f"demo {text!r}", "demo", demo=text, _path=getattr(module, "camera_path", None))
     raise LevelError(
-        f"{text!r} is neither a scene file (.json), a level module (.py) nor a demo (demos: {', '.join(modules)})"
+        f"{shorten(text)!r} is neither a scene file (.json), a level module (.py) nor a demo"
+        f" (demos: {', '.join(modules)})"
     )
 
 

@@ -45,10 +45,12 @@ def render(
 
     ``backend`` is a :class:`backends.base.Backend` you opened (used, and left
     open for the next frame), or a name (``reference``, ``glsl``, ``opencl``,
-    ``auto``), or ``None`` for ``$ABERRANT_BACKEND`` or ``auto``. A backend
-    chosen by name is probed first: one that cannot start here falls back to
-    the fastest that can, with the same one-line message the command line
-    prints (to stderr, or to ``log``), and it is released before this returns.
+    ``auto``), or ``None`` for ``$ABERRANT_BACKEND`` or ``auto``. As on the
+    command line, a backend named here that cannot start raises
+    :class:`engine.errors.BackendUnavailable` with the reason (an explicit
+    choice is never swapped for another), while ``auto`` says which one it
+    chose (to stderr, or to ``log``). A backend opened here is released before
+    this returns.
     ``aovs`` names the outputs to trace (one name or several; see ``AOVS``).
 
     >>> import aberrant
@@ -67,7 +69,7 @@ def render(
                 f"traces at {backend.precision}"
             )
         return render_once(scene, backend, (width, height), names)
-    opened = create_backend(backend, precision=precision, fallback=True, log=log)
+    opened = create_backend(backend, precision=precision, fallback=False, log=log)
     try:
         return render_once(scene, opened, (width, height), names)
     finally:

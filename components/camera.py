@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from components.validation import ValidationError, real
+from components.validation import ValidationError, at_most, real
 
 
 @dataclass(frozen=True)
@@ -25,5 +25,6 @@ class Camera:
         speed = real(self.speed, "speed")
         if speed <= 0.0:
             raise ValidationError("speed", f"must be positive, got {speed}")
+        at_most(speed, "speed", "a speed")
         object.__setattr__(self, "fov_deg", fov)
         object.__setattr__(self, "speed", speed)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from components.validation import Quat, ValidationError, Vec3, unit_quaternion, vec3
+from components.validation import Quat, ValidationError, Vec3, at_most, unit_quaternion, vec3
 
 
 @dataclass(frozen=True, init=False)
@@ -35,4 +35,5 @@ class Transform:
                 raise ValidationError(
                     f"scale[{i}]", "a scale component of zero collapses the entity; use a small non-zero value"
                 )
+            at_most(s, f"scale[{i}]", "a scale")
         object.__setattr__(self, "scale", checked)

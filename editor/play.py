@@ -11,17 +11,17 @@ byte the save before Play.
 from __future__ import annotations
 
 import math
-import tempfile
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from backends.base import Backend, Frame
 from engine.camera_view import CameraView, scene_camera
-from engine.errors import AberrantError
+from engine.errors import AberrantError, shorten
 from engine.input import NO_INPUT, InputState
 from engine.scene import Scene
-from engine.scene_file import load_scene, scene_to_json
+from engine.scene_file import scene_from_text, scene_to_json
 from systems.app import App
 
 #: Degrees turned per pixel of mouse movement.
@@ -66,11 +66,13 @@ def input_state(keys: Keys, sensitivity: float = MOUSE_SENSITIVITY) -> InputStat
 
 
 def scene_copy(scene: Scene) -> Scene:
-    """A separate scene built from the JSON text of ``scene`` (asset files are referred to by absolute path)."""
-    with tempfile.TemporaryDirectory(prefix="aberrant-play-") as folder:
-        file = Path(folder) / "play.json"
-        file.write_text(scene_to_json(scene, Path(folder)), encoding="utf-8")
-        return load_scene(file)
+    """A separate scene built from the JSON text of ``scene``; an error names the edited scene.
+
+    Asset paths are written relative to the filesystem root, so they read back
+    as the same absolute files without a temporary file to name in messages.
+    """
+    root = Path(os.path.abspath(os.sep))
+    return scene_from_text(scene_to_json(scene, root), f"scene {shorten(scene.name)!r}", root)
 
 
 class PlaySession:

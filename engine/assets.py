@@ -7,10 +7,12 @@ two entities naming one file share one asset, and an edited file is re-read.
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import hashlib
 import logging
 import math
+import os
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -19,7 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from engine.errors import AberrantError
+from engine.atomic_files import read_regular
+from engine.errors import AberrantError, shorten
 
 if TYPE_CHECKING:
     import trimesh
@@ -192,24 +195,27 @@ class AssetLibrary:
 
     def load(self, path: str | Path) -> MeshAsset:
         p = Path(path).expanduser()
+        name = shorten(p)
         try:
             resolved = p.resolve(strict=True)
             st = resolved.stat()
         except FileNotFoundError:
-            raise AssetError(f"{p}: mesh file not found") from None
+            raise AssetError(f"{name}: mesh file not found") from None
+        except RuntimeError:  # Python 3.11's Path.resolve on a symlink loop (3.13 raises OSError ELOOP)
+            raise AssetError(f"{name}: a symlink loop, not a mesh file") from None
         except OSError as e:
-            raise AssetError(f"{p}: cannot read mesh file ({e.strerror or e})") from None
+            raise AssetError(f"{name}: cannot read mesh file ({e.strerror or e})") from None
         except ValueError as e:  # a NUL byte in the path (a hand-edited or hostile scene file)
-            raise AssetError(f"{str(p)!r}: not a usable file path ({e})") from None
+            raise AssetError(f"{shorten(p)!r}: not a usable file path ({e})") from None
         if not resolved.is_file():
-            raise AssetError(f"{p}: not a file")
+            raise AssetError(f"{name}: not a file")
         key = (str(resolved), st.st_mtime_ns, st.st_size)
         if key in self._by_stat:
             return self._by_stat[key]
         try:
-            data = resolved.read_bytes()
+            data = read_regular(resolved)  # swapped for a FIFO since the stat: refused, not read forever
         except OSError as e:  # unreadable (permissions, I/O error) or removed since the stat
-            raise AssetError(f"{p}: cannot read mesh file ({e.strerror or e})") from None
+            raise AssetError(f"{name}: cannot read mesh file ({e.strerror or e})") from None
         digest = hashlib.sha256(data).hexdigest()
         asset = self._by_content.get(digest)
         if asset is None:
@@ -225,6 +231,11 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
         raise AssetError(f"{path}: unsupported mesh format {suffix or '(none)'}; use one of {', '.join(MESH_SUFFIXES)}")
     if not data.strip():
         raise AssetError(f"{path}: the file is empty")
+    if suffix in TEXT_SUFFIXES:
+        try:
+            data = as_utf8(data)
+        except UnicodeError as e:
+            raise AssetError(f"{path}: cannot decode the text ({e})") from None
     import io
 
     import trimesh
@@ -266,7 +277,69 @@ def _quiet_trimesh() -> Iterator[None]:
         logger.propagate = propagate
 
 
-def _resolver(path: Path) -> trimesh.resolvers.FilePathResolver:
-    import trimesh
+#: Mesh formats that are text, decoded by :func:`as_utf8` before trimesh parses them (it assumes UTF-8).
+TEXT_SUFFIXES = (".obj", ".off", ".mtl")
+_BOMS = (
+    (codecs.BOM_UTF32_LE, "utf-32"),
+    (codecs.BOM_UTF32_BE, "utf-32"),
+    (codecs.BOM_UTF8, "utf-8-sig"),
+    (codecs.BOM_UTF16_LE, "utf-16"),
+    (codecs.BOM_UTF16_BE, "utf-16"),
+)
 
-    return trimesh.resolvers.FilePathResolver(str(path))
+
+def as_utf8(data: bytes) -> bytes:
+    """Text in any encoding a mesh exporter writes, as UTF-8 without a byte-order mark.
+
+    A byte-order mark says the encoding (UTF-8, UTF-16, UTF-32; a UTF-8 mark
+    left in place would become part of the first keyword); without one, NUL
+    bytes in every other position mean UTF-16, then UTF-8 is tried, then
+    Latin-1 (which decodes any bytes: names and comments are all it can touch).
+    trimesh would otherwise guess with ``charset_normalizer``, an optional
+    dependency, and fail without it.
+    """
+    for bom, codec in _BOMS:
+        if data.startswith(bom):
+            return data.decode(codec).encode("utf-8")
+    sample = data[:4096]
+    if len(sample) >= 4:
+        even, odd = sample[0::2].count(0), sample[1::2].count(0)
+        if odd > len(sample) // 4 and even == 0:
+            return data.decode("utf-16-le").encode("utf-8")
+        if even > len(sample) // 4 and odd == 0:
+            return data.decode("utf-16-be").encode("utf-8")
+    try:
+        data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1").encode("utf-8")
+    return data
+
+
+_SAFE_RESOLVER: type | None = None
+
+
+def _resolver(path: Path) -> trimesh.resolvers.FilePathResolver:
+    """trimesh's resolver for files a mesh names (``mtllib``, ``map_Kd``), refusing FIFOs and devices.
+
+    trimesh would ``open()`` and read them: a FIFO blocks forever, a device
+    never ends. Materials are read as text in any encoding (:func:`as_utf8`).
+    """
+    global _SAFE_RESOLVER
+    if _SAFE_RESOLVER is None:
+        import trimesh
+
+        class SafeResolver(trimesh.resolvers.FilePathResolver):
+            def get(self, name: str) -> bytes:
+                for candidate in (name.strip(), name.strip().lstrip("/"), os.path.split(name)[-1]):
+                    try:
+                        file = self.absolute(candidate)
+                    except ValueError:  # outside the mesh's folder
+                        continue
+                    if file.exists():
+                        data = read_regular(file)
+                        return as_utf8(data) if file.suffix.lower() in TEXT_SUFFIXES else data
+                self.absolute(name)  # the actionable error when the name escapes the folder
+                raise FileNotFoundError(name)
+
+        _SAFE_RESOLVER = SafeResolver
+    return _SAFE_RESOLVER(str(path))

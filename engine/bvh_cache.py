@@ -8,6 +8,7 @@ cache file is only a miss (the tree is rebuilt and the file rewritten whole).
 from __future__ import annotations
 
 import hashlib
+import io
 import logging
 import os
 import tempfile
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from engine.atomic_files import read_regular
 from engine.bvh import BUILDER_VERSION, Bvh, BvhParams, build_bvh, frozen_bvh, validated_geometry
 from engine.bvh_wide import collapse
 from engine.layout import BVH_WIDTHS
@@ -47,8 +49,8 @@ def _cache_key(verts: np.ndarray, tris: np.ndarray, params: BvhParams, width: in
 
 
 def _load(path: Path, key: str, m: int, params: BvhParams, width: int = 2) -> Bvh:
-    """Read a cached tree, checking it is whole; raises on anything suspicious."""
-    with np.load(path, allow_pickle=False) as data:
+    """Read a cached tree, checking it is whole; raises on anything suspicious (a FIFO there too, at once)."""
+    with np.load(io.BytesIO(read_regular(path)), allow_pickle=False) as data:
         if str(data["key"]) != key:
             raise ValueError("cache key mismatch")
         raw = np.ascontiguousarray(data["nodes"], dtype=np.int32)

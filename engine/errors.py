@@ -2,6 +2,18 @@
 
 from __future__ import annotations
 
+#: The most characters of one user-given value (a name, a path) that a message quotes.
+QUOTE_LIMIT = 160
+
+
+def shorten(value: object, limit: int = QUOTE_LIMIT) -> str:
+    """``str(value)``, or its first ``limit`` characters and its length: a message quoting a 200 MB name
+    stays one readable line."""
+    text = str(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text):,} characters)"
+
 
 class AberrantError(Exception):
     """Base of every error caused by input (files, parameters, arguments), not by a bug."""

@@ -18,10 +18,12 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import esper
+import numpy as np
 
 from components import Aberration, Camera, Mesh, Name, Portal, Transform, ValidationError
+from components.validation import MAX_MAGNITUDE
 from engine.assets import PRIMITIVES, AssetLibrary, MeshAsset
-from engine.errors import SceneError
+from engine.errors import AberrantError, SceneError
 from engine.keyframes import Keyframe
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.settings import Settings
@@ -438,6 +440,27 @@ class Scene:
 
     # --- whole-scene checks -------------------------------------------------
 
+    def check_mesh_sizes(self) -> None:
+        """Every mesh's world-space size (its scale times its vertices' reach) within MAX_MAGNITUDE: the
+        product of two valid numbers can still overflow what the tracers hold."""
+        reaches: dict[str, float] = {}
+        for entity, (mesh, transform) in self.query(Mesh, Transform):
+            if mesh.asset not in reaches:
+                try:
+                    vertices = self.asset(mesh.asset).vertices
+                except AberrantError:  # an unreadable file: its loader reports it, naming the entity
+                    continue
+                reaches[mesh.asset] = float(np.max(np.abs(vertices))) if vertices.size else 0.0
+            scale, reach = max(abs(s) for s in transform.scale), reaches[mesh.asset]
+            if scale * reach <= MAX_MAGNITUDE:
+                continue
+            raise SceneError(
+                f"the mesh's world-space size, scale x its farthest vertex ({scale:g} x {reach:g}), is beyond "
+                f"{MAX_MAGNITUDE:g}: it overflows the tracers' float32 ranges; scale it down",
+                entity=self.name_of(entity),
+                field="transform.scale",
+            )
+
     def validate(self) -> None:
         """Cross-entity checks the components cannot make alone."""
         if self.camera_entity is None:
@@ -459,3 +482,4 @@ class Scene:
         for entity, mesh in self.query(Mesh):
             if mesh.asset not in self.assets and mesh.asset not in PRIMITIVES:
                 raise SceneError(f"unknown asset {mesh.asset!r}", entity=self.name_of(entity), field="mesh.asset")
+        self.check_mesh_sizes()

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +38,8 @@ import numpy as np
 from components import Aberration, Camera, Mesh, Portal, Transform, ValidationError
 from components.validation import vec3
 from engine.assets import PRIMITIVES
-from engine.atomic_files import write_atomically
-from engine.errors import AberrantError, SceneError
+from engine.atomic_files import read_regular, write_atomically
+from engine.errors import AberrantError, SceneError, shorten
 from engine.keyframes import CameraPathError, Keyframe, checked_keyframes
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.scene import AssetSpec, Scene
@@ -398,6 +398,10 @@ class _Reader:
         for name in scene.assets:
             if name not in loaded:
                 self.load_asset(scene, name, entity=self.asset_label(name), field=f"assets.{name}")
+        try:
+            scene.check_mesh_sizes()
+        except SceneError as e:
+            raise self.fail(e.detail, entity=e.entity, field=e.field) from None
 
     def load_asset(self, scene: Scene, name: str, *, entity: str, field: str) -> None:
         try:
@@ -420,17 +424,22 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
 
     Raises :class:`engine.scene_file.SceneFileError` naming file, entity and field on any problem.
     """
-    file = str(path)
+    file = shorten(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_regular(path).decode("utf-8")
     except FileNotFoundError:
         raise SceneFileError(file, "scene file not found") from None
     except IsADirectoryError:
         raise SceneFileError(file, "is a directory, not a scene file") from None
     except UnicodeDecodeError as e:
         raise SceneFileError(file, f"not UTF-8 text (byte {e.start}): not a scene file") from None
-    except OSError as e:
+    except OSError as e:  # unreadable, or a FIFO or device (refused rather than read forever)
         raise SceneFileError(file, f"cannot read scene file ({e.strerror or e})") from None
+    return scene_from_text(text, file, Path(os.path.abspath(path)).parent)
+
+
+def scene_from_text(text: str, file: str, base_dir: Path) -> Scene:
+    """A scene from the text of a scene file; errors name ``file``, relative asset paths start at ``base_dir``."""
     try:
         doc = json.loads(text, object_pairs_hook=_object_pairs)
     except json.JSONDecodeError as e:
@@ -442,7 +451,7 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
     where = _unencodable_string(doc)
     if where is not None:  # "\ud800" is valid JSON but no Unicode text: it could never be saved again
         raise SceneFileError(file, "a string holds a lone UTF-16 surrogate (\\ud800-\\udfff escape)", field=where)
-    return _Reader(file).read(doc, Path(os.path.abspath(path)).parent)
+    return _Reader(file).read(doc, base_dir)
 
 
 def _unencodable_string(doc: object) -> str | None:
@@ -471,10 +480,13 @@ def _unencodable_string(doc: object) -> str | None:
     return None
 
 
-def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
+def save_scene(scene: Scene, path: str | os.PathLike[str], *, with_files: Mapping[Path, bytes] | None = None) -> None:
     """Write ``scene`` to ``path`` atomically.
 
     Raises :class:`engine.scene_file.SceneFileError` (the old file intact) on failure.
+
+    ``with_files`` (an importer's meshes) are written in the same atomic write:
+    all of them and the scene, or, when one cannot be written, none of them.
     """
     file = str(path)
     target_dir = Path(os.path.abspath(path)).parent
@@ -489,8 +501,8 @@ def save_scene(scene: Scene, path: str | os.PathLike[str]) -> None:
     except UnicodeEncodeError as e:
         raise SceneFileError(file, f"cannot save: a name holds text that is not valid Unicode ({e.reason})") from None
     try:
-        write_atomically({path: data})
+        write_atomically({**(with_files or {}), path: data})
     except OSError as e:
         if not target_dir.is_dir():
             raise SceneFileError(file, f"cannot save: the folder {str(target_dir)!r} does not exist") from e
-        raise SceneFileError(file, f"cannot save ({e.strerror or e})") from e
+        raise SceneFileError(shorten(e.filename or file), f"cannot save ({e.strerror or e})") from e

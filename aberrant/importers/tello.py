@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -58,7 +59,6 @@ from aberrant.importers.tello_format import (
 )
 from components import Aberration, Mesh, Portal, Transform, ValidationError
 from components.validation import real, vector
-from engine.atomic_files import write_atomically
 from engine.errors import AberrantError
 from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
 from engine.scene import Scene
@@ -459,14 +459,18 @@ def import_tello(
         raise AberrantError(f"checker must be a finite number >= 0, got {checker}")
     importer = _Importer(str(scene_path), mesh_path, out_path, checker)
     scene, files = importer.build(doc)
+    folder = files[0][1].parent if files else None
+    made = folder is not None and not folder.exists()
     try:
         scene.validate()
-        if files:
-            files[0][1].parent.mkdir(exist_ok=True)
-        write_atomically({path: mesh_to_obj(importer.meshes[uid], f"TelloEngine mesh {uid}") for uid, path in files})
-        save_scene(scene, out_path)
+        if folder is not None:
+            folder.mkdir(exist_ok=True)
+        meshes = {path: mesh_to_obj(importer.meshes[uid], f"TelloEngine mesh {uid}") for uid, path in files}
+        save_scene(scene, out_path, with_files=meshes)  # the meshes and the scene, or (a full disk) none
     except BaseException:
         scene.close()
+        if made and folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
         raise
     counts = {
         "meshes": len(scene.query(Mesh)),

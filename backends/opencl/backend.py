@@ -17,8 +17,9 @@ as float64) where the device has ``cl_khr_fp64``.
 
 from __future__ import annotations
 
-import contextlib
+import hashlib
 import os
+import sys
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
@@ -27,6 +28,8 @@ import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
+from backends.opencl import cache
+from backends.opencl.cache import configure_caches
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -87,24 +90,6 @@ GPU_LOCAL_SIZE: tuple[int, int] = (8, 8)
 
 
 # --- caches and devices -------------------------------------------------------------------
-
-
-def configure_caches() -> str | None:
-    """Point PoCL's kernel cache at ``$ABERRANT_CACHE_DIR/opencl`` (so CI runs are repeatable).
-
-    Must run before PoCL is first initialised (the first platform query of the
-    process); a user's own ``POCL_CACHE_DIR`` wins. Returns the directory for
-    pyopencl's compiler cache (which has no environment variable: it is passed
-    to each build), or ``None`` to keep pyopencl's default.
-    """
-    root = os.environ.get("ABERRANT_CACHE_DIR")
-    if not root:
-        return None
-    base = os.path.join(root, "opencl")
-    pocl = os.environ.setdefault("POCL_CACHE_DIR", os.path.join(base, "pocl"))
-    with contextlib.suppress(OSError):  # an unwritable cache costs rebuilds, never a failure
-        os.makedirs(pocl, exist_ok=True)
-    return os.path.join(base, "pyopencl")
 
 
 #: PoCL settings the backend applies when the user has not set them (read once, at PoCL's init).
@@ -206,6 +191,10 @@ def pocl_version(platform: cl.Platform) -> str | None:
     return None
 
 
+def _first_line(text: str) -> str:
+    return next((line.strip() for line in text.splitlines() if line.strip()), "")
+
+
 # --- the backend -------------------------------------------------------------------------
 
 
@@ -251,7 +240,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self.local_size: tuple[int, int] | None = (
             None if local_size is None else (int(local_size[0]), int(local_size[1]))
         )
-        self._ctx: cl.Context | None = self._cl.Context([self.device])
+        self._ctx: cl.Context | None = cache.shared_context(self.device)
         self._queue = self._cl.CommandQueue(self._ctx)
         self._tables: dict[str, cl.Buffer] = {}
         self._forget_upload()
@@ -263,6 +252,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._kernels: dict[tuple[tuple[str, int], ...], cl.Kernel] = {}
         #: Arguments last set on each kernel (by id of the kernel): re-set only what changed.
         self._bound: dict[int, list[object]] = {}
+        #: The program (source hash, options) of each kernel (by id), to give it back on release.
+        self._program_keys: dict[int, tuple[str, tuple[str, ...]]] = {}
         #: How many program variants this backend has built (tests check the cache).
         self.compile_count = 0
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
@@ -392,16 +383,39 @@ class OpenClBackend(shared.UploadedScene, Backend):
         key = (*sorted(defines.items()), *((option, 1) for option in self.build_options))
         kernel = self._kernels.get(key)
         if kernel is None:
-            cl = self._cl
-            program = cl.Program(self._context(), self.source(defines))
-            try:
-                program = program.build(options=list(self.build_options), cache_dir=self._cache_dir)
-            except cl.Error as e:  # its message carries the build log
-                raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
-            kernel = cl.Kernel(program, "trace")
+            kernel = self._build(self.source(defines))
             self._kernels[key] = kernel
             self.compile_count += 1
         return kernel
+
+    def _build(self, source: str) -> cl.Kernel:
+        """This backend's kernel object of a program built once per context (see :mod:`backends.opencl.cache`)."""
+        context = self._context()
+        key = (hashlib.sha256(source.encode()).hexdigest(), tuple(self.build_options))
+        program = cache.kept_program(context, key, lambda: self._build_program(source))
+        kernel = cache.take_kernel(context, key, lambda: self._cl.Kernel(program, "trace"))
+        self._program_keys[id(kernel)] = key
+        return kernel
+
+    def _build_program(self, source: str) -> cl.Program:
+        """Build one program; a failure that came from a cached entry removes that entry and tries once more."""
+        cl = self._cl
+        for attempt in (1, 2):
+            started = time.time() - 1.0  # file times are coarse on some file systems
+            try:
+                return cl.Program(self._context(), source).build(
+                    options=list(self.build_options), cache_dir=self._cache_dir
+                )
+            except cl.Error as e:  # its message carries the build log
+                removed = cache.forget_touched(cache.pocl_cache_dir(), started) if attempt == 1 else []
+                if not removed:
+                    raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
+                print(
+                    f"aberrant: warning: the OpenCL kernel did not build from its cache entry {removed[0]} "
+                    f"({_first_line(str(e))}); removed it, rebuilding",
+                    file=sys.stderr,
+                )
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def _bind(self, kernel: cl.Kernel, args: list[cl.Buffer | None]) -> None:
         """Set the kernel arguments that differ from what it holds (each set costs a driver call)."""
@@ -447,6 +461,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
         queue.finish()
         traced = time.perf_counter()
+        cache.record_once(cache.pocl_cache_dir(), (self._program_keys[id(kernel)], self.local_size))
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = _OUTPUT_DTYPES[name]
@@ -463,7 +478,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
     # --- teardown -----------------------------------------------------------------------
 
     def release(self) -> None:
-        """Free buffers, kernels and the context; idempotent."""
+        """Free buffers, kernels and the queue; idempotent. The device's context and the programs built in
+        it stay for the next backend (:func:`backends.opencl.cache.shared_context`)."""
         if self._ctx is None:
             return
         self._queue.finish()
@@ -471,7 +487,10 @@ class OpenClBackend(shared.UploadedScene, Backend):
             buffer.release()
         self._tables.clear()
         self._outputs.clear()
+        cache.give_back_kernels(self._ctx, [(self._program_keys[id(k)], k) for k in self._kernels.values()])
         self._kernels.clear()
+        self._program_keys.clear()
         self._bound.clear()
+        self._camera_row = None
         self._ctx = None
         self._uploaded = False

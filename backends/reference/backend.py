@@ -29,7 +29,10 @@ class ReferenceBackend(Backend):
 
     name: ClassVar[str] = "reference"
     precisions: ClassVar[tuple[Precision, ...]] = ("f64",)
-    camera_relative: bool = False
+    #: Camera-relative tables, like the fast backends' floating origin: the tracer's tolerances scale with
+    #: ``|o|`` (``T_MIN_RELATIVE``, ``TIE_RELATIVE``), so in world coordinates a scene 1e10 from the origin
+    #: had a 10-unit ``t_min`` and vanished; relative to the camera's 16-unit cell they stay tiny.
+    camera_relative: bool = True
 
     def __init__(self, precision: Precision | None = None) -> None:
         super().__init__(precision)

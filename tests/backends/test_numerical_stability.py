@@ -19,8 +19,11 @@ digits shown)::
     boxes at 1e3 / 1e5 / 1e6               0 %, 9e-8 / <= 6e-7               0 %, 0 / 0
     aberrations at 1e3 / 1e5 / 1e6         0 %, 7e-8 / <= 4e-7               0 %, 0 / 0
     portals at 1e3 / 1e5 / 1e6             0 %, <= 1.3e-7 / <= 8e-7          0 %, 0 / 0
-      (the reference itself at 1e6 against the origin: 0.029 % on the aberration scene -- its
-       float64 t_min, 1e-9 |o|, is 1e-3 there -- 0 % on the others)
+    all three at 1e9 / 1e10 / 1e12     the reference against the fast backends there: as above;
+      the reference against the origin: 0 % / 0 % / <= 0.014 % (at 1e12 the scene's own float64
+      positions are 1.2e-4 apart; every backend moves the same pixels). The reference traces
+      camera-relative like the fast backends: in world coordinates its t_min (1e-9 |o|) was 10
+      units at 1e10, and it hit 0.1 % of pixels there, none at 1e12
     every scene scaled 1e-2, 1e2, 1e4      0 %, 8e-8 / <= 4e-7               0 %, 0 / 1.2e-7 (float32 AOV)
     scaled 1e-3                            <= 0.072 %, p99 <= 1.9e-6         0 %
     scaled 1e-4: boxes                     0 %                               0 %
@@ -66,6 +69,7 @@ from scenes import (
     EVERY,
     F32_DEPTH_MEDIAN_MAX,
     F64_DEPTH_P99_MAX,
+    FAST,
     MISMATCH_MAX,
     ReferenceFrames,
     aberration_boxes,
@@ -84,6 +88,7 @@ from test_parity_portals import portal_in_aberrations, rooms
 from aberrant.bench.scenes import inside_grid_cube, inside_sphere, translated
 from backends.base import Frame
 from components import Transform
+from components.validation import MAX_MAGNITUDE
 from engine.maths import quat_from_euler_deg, quat_multiply, quat_to_matrix
 from engine.scene import Scene
 
@@ -307,6 +312,45 @@ def test_far_from_the_origin(backend_factory, origin_frames, backend_name, preci
     assert_as_at_the_origin(frame, origin_frames(case), precision)
 
 
+#: Far enough that the reference's tolerances (relative to |o|) used to swallow the scene in world coordinates.
+FAR_OFFSETS = {f"{m:.0e}": (m * 1.0000037, -m * 0.9999961, m * 1.00000173) for m in (1e9, 1e10, 1e12)}
+
+
+@pytest.fixture(scope="module")
+def far_reference_frames() -> Iterator[ReferenceFrames]:
+    """The reference's frame of each scene moved by each of :data:`FAR_OFFSETS`."""
+    builders = {
+        f"{case}@{offset}": (lambda case=case, offset=offset: translated(FAR_SCENES[case](), FAR_OFFSETS[offset]))
+        for case in FAR_SCENES
+        for offset in FAR_OFFSETS
+    }
+    frames = ReferenceFrames(builders, SIZE)
+    yield frames
+    frames.release()
+
+
+@pytest.mark.parametrize("offset", list(FAR_OFFSETS))
+@pytest.mark.parametrize("case", list(FAR_SCENES))
+def test_the_reference_far_from_the_origin_is_the_frame_at_the_origin(
+    origin_frames, far_reference_frames, case, offset
+):
+    """It traces camera-relative, as the fast backends do: 1e10 away it used to hit 0.1 % of pixels, 1e12 none.
+    (At 1e12 the scene file's own float64 positions are 1.2e-4 apart: a few edge pixels move, in every backend.)"""
+    result = compare(far_reference_frames(f"{case}@{offset}"), origin_frames(case))
+    assert result.mismatch <= MISMATCH_MAX, result
+
+
+@pytest.mark.parametrize("offset", list(FAR_OFFSETS))
+@pytest.mark.parametrize("case", list(FAR_SCENES))
+@pytest.mark.parametrize(("backend_name", "precision"), FAST)
+def test_far_from_the_origin_the_fast_backends_agree_with_the_reference(
+    backend_factory, far_reference_frames, backend_name, precision, case, offset
+):
+    backend = backend_factory(backend_name, precision)
+    frame = render_scene(backend, lambda: translated(FAR_SCENES[case](), FAR_OFFSETS[offset]), SIZE)
+    assert_as_at_the_origin(frame, far_reference_frames(f"{case}@{offset}"), precision)
+
+
 # --- object scales -------------------------------------------------------------------------------------------------
 
 SCALES = (1e-4, 1e-2, 1e2, 1e4)
@@ -354,6 +398,31 @@ def test_object_scales(backend_factory, origin_frames, backend_name, precision, 
         assert result.depth_p99 <= 3e-7, result  # the scaled float32 depth AOV itself rounds to ~1e-7
     else:
         assert result.depth_median <= F32_DEPTH_MEDIAN_MAX, result
+
+
+def at_the_size_limit(kind: str) -> Scene:
+    """A ball on a floor, and a box (a mesh around everything, or an aberration) scaled by MAX_MAGNITUDE."""
+    scene = Scene(f"{kind} at the limit")
+    scene.add_mesh("floor", "plane", scale=(10.0, 1.0, 10.0))
+    scene.add_mesh("ball", "sphere", position=(0.5, 1.0, 0.0))
+    if kind == "mesh":
+        scene.add_mesh("huge", "box", position=(0.0, 1.0, -3.0), scale=MAX_MAGNITUDE)
+    else:
+        scene.add_aberration("huge", (1.0, 0.0, 0.0), position=(0.0, 1.0, 0.0), scale=(MAX_MAGNITUDE, 1.0, 1.0))
+    scene.set_camera((0.0, 1.5, 5.0), look_at=(0.0, 1.0, 0.0))
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["mesh", "aberration"])
+@pytest.mark.parametrize(("backend_name", "precision"), FAST)
+def test_sizes_up_to_the_validation_limit_agree_with_the_reference(
+    backend_factory, reference, backend_name, precision, kind
+):
+    """Scales are refused beyond MAX_MAGNITUDE (1e36); up to it every backend renders what the reference does."""
+    frame = render_scene(backend_factory(backend_name, precision), lambda: at_the_size_limit(kind), SIZE)
+    assert_clean(frame)
+    truth = reference(f"limit-{kind}", lambda: at_the_size_limit(kind), SIZE)
+    assert compare(frame, truth).mismatch <= MISMATCH_MAX
 
 
 # --- a portal at the camera ----------------------------------------------------------------------------------------

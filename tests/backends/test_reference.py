@@ -62,7 +62,7 @@ def test_backend_contract():
     assert backend_class("reference") is ReferenceBackend
     assert ReferenceBackend.name == "reference"
     assert ReferenceBackend.precisions == ("f64",)
-    assert ReferenceBackend.camera_relative is False
+    assert ReferenceBackend.camera_relative is True  # tolerances scale with |o|: trace near the camera
     assert ReferenceBackend.probe() is None
     backend = ReferenceBackend()
     with pytest.raises(AberrantError, match="upload"):
@@ -410,8 +410,9 @@ def test_many_instances_match_brute_force():
     backend, packer = upload(scene)
     camera = scene_camera(scene)
     d = camera.primary_directions(40, 30).reshape(-1, 3)
-    o = np.broadcast_to(camera.position, d.shape).copy()
-    t_min = np.full(len(d), 1e-9 * float(np.linalg.norm(camera.position)))
+    assert packer.packed is not None
+    o = np.broadcast_to(camera.position - packer.packed.origin, d.shape).copy()  # the tables' coordinates
+    t_min = np.full(len(d), 1e-9 * max(1.0, float(np.linalg.norm(o[0]))))
     geo = backend.geometry
     hits = nearest_mesh_hits(geo, o, d, t_min)
     best_t, best_entity = np.full(len(d), np.inf), np.full(len(d), -1)

@@ -19,7 +19,7 @@ import aberrant
 import backends.base
 from aberrant.cli import main
 from backends.reference.backend import ReferenceBackend
-from engine.errors import AberrantError
+from engine.errors import AberrantError, BackendUnavailable
 from systems.app import App, render_once
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -139,25 +139,22 @@ def test_render_refuses_a_precision_its_given_backend_does_not_trace(scene) -> N
         aberrant.render(scene, backend, SIZE, precision="f32")
 
 
-def test_an_asked_for_backend_that_cannot_start_falls_back_saying_so_as_the_cli_does(
+def test_an_asked_for_backend_that_cannot_start_fails_with_its_reason_as_the_cli_does(
     no_fast_backends: None, scene, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    frame = aberrant.render(scene, "opencl", SIZE, "color")
-    assert frame.color is not None
-    said = capsys.readouterr().err.splitlines()
-    assert said == [
-        "aberrant: opencl backend cannot run here (no OpenCL platform (test)); falling back to the reference backend"
-    ]
-    out = tmp_path / "frame.png"
-    assert main(["render", "starter", "--backend", "opencl", "--size", "16x12", "--out", str(out)]) == 0
-    assert capsys.readouterr().err.splitlines() == said
-
-    messages: list[str] = []
-    aberrant.render(scene, "glsl", SIZE, "color", log=messages.append)
-    assert messages == [
-        "aberrant: glsl backend cannot run here (no EGL display (test)); falling back to the reference backend"
-    ]
+    """An explicit choice is never swapped for another backend: render() and the CLI both say why it cannot run."""
+    with pytest.raises(BackendUnavailable, match="opencl backend cannot run here: no OpenCL platform") as caught:
+        aberrant.render(scene, "opencl", SIZE, "color")
+    assert "\n" not in str(caught.value)
     assert capsys.readouterr().err == ""
+    out = tmp_path / "frame.png"
+    assert main(["render", "starter", "--backend", "opencl", "--size", "16x12", "--out", str(out)]) == 2
+    assert "opencl backend cannot run here" in capsys.readouterr().err
+    assert not out.exists()
+    messages: list[str] = []
+    with pytest.raises(BackendUnavailable, match="glsl backend cannot run here"):
+        aberrant.render(scene, "glsl", SIZE, "color", log=messages.append)
+    assert messages == []
 
 
 def test_auto_says_which_backend_it_chose(no_fast_backends: None, scene, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -3,13 +3,15 @@
 Each gives a clear message and a fallback where one exists:
 
 * a backend that cannot start is probed with a reason naming what to
-  install; ``aberrant render --backend X`` falls back (one stderr line) and
-  still renders; ``aberrant backends`` and the editor's backend host show the
-  reason without crashing;
+  install; ``aberrant render --backend X`` fails with that reason in one line
+  (exit 2: a named backend never quietly renders with another), ``--backend
+  auto`` picks one that starts; ``aberrant backends`` and the editor's backend
+  host show the reason without crashing;
 * a kernel that does not build fails on the first frame (kernels are built
-  lazily, per scene variant), so the CLI falls back to the reference backend
-  at render time with one line naming the backend and the compiler's first
-  errors; the editor keeps the error and shows its raster preview;
+  lazily, per scene variant): a named backend fails in one line naming it and
+  the compiler's first errors, ``auto`` falls back to the reference backend at
+  render time with that line; the editor keeps the error and shows its raster
+  preview;
 * a save that cannot complete (folder removed, read-only, disk full) raises a
   SceneFileError naming the file, leaves the previous file intact and no
   temporary behind. Killing a process mid-save is tested in test_atomic_save.py.
@@ -92,14 +94,17 @@ def test_probe_without_a_gl_context_says_why_and_what_to_install(no_gl_context):
     assert "apt-get install" in reason and "libegl-mesa0" in reason
 
 
-def test_render_without_a_gl_context_falls_back_in_one_line(no_gl_context, tmp_path, capsys, monkeypatch):
+def test_render_without_a_gl_context_fails_in_one_line(no_gl_context, tmp_path, capsys, monkeypatch):
     only_reference_after(monkeypatch, "glsl")
     out = tmp_path / "frame.png"
-    code, stdout, stderr = run(capsys, "render", "starter", "--backend", "glsl", *SIZE, "--out", str(out))
-    assert code == 0
+    code, _, stderr = run(capsys, "render", "starter", "--backend", "glsl", *SIZE, "--out", str(out))
+    assert code == 2
     assert len(stderr) == 1, stderr
-    assert stderr[0].startswith("aberrant: glsl backend cannot run here (no headless OpenGL 4.3 context")
-    assert stderr[0].endswith("; falling back to the reference backend")
+    assert stderr[0].startswith("aberrant: error: glsl backend cannot run here: no headless OpenGL 4.3 context")
+    assert stderr[0].endswith("; --backend auto picks one that can")
+    assert not out.exists()
+    code, stdout, stderr = run(capsys, "render", "starter", "--backend", "auto", *SIZE, "--out", str(out))
+    assert (code, stderr) == (0, ["aberrant: auto chose the reference backend"])
     assert out.is_file() and "with the reference backend" in stdout
 
 
@@ -132,7 +137,7 @@ def test_editor_backend_host_reports_no_gl_context_and_goes_on(no_gl_context, st
     host.close()
 
 
-def test_a_process_whose_egl_finds_no_device_falls_back(tmp_path):
+def test_a_process_whose_egl_finds_no_device_says_so(tmp_path):
     """The real thing, in a subprocess: glvnd given a vendor list that does not exist loads no EGL driver."""
     pytest.importorskip("moderngl")
     env = {**os.environ, "__EGL_VENDOR_LIBRARY_FILENAMES": str(tmp_path / "no-such-vendor.json")}
@@ -142,12 +147,11 @@ def test_a_process_whose_egl_finds_no_device_falls_back(tmp_path):
     result = subprocess.run(
         [sys.executable, "-m", "aberrant.cli", *argv], env=env, cwd=ROOT, capture_output=True, text=True, timeout=300
     )
-    assert result.returncode == 0, result.stderr
+    assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr
-    fallbacks = [line for line in result.stderr.splitlines() if line.startswith("aberrant: glsl backend cannot run")]
-    assert len(fallbacks) == 1, result.stderr
-    assert "no headless OpenGL 4.3 context" in fallbacks[0] and "falling back to the" in fallbacks[0]
-    assert out.is_file()
+    [line] = result.stderr.splitlines()
+    assert line.startswith("aberrant: error: glsl backend cannot run here: no headless OpenGL 4.3 context"), line
+    assert not out.exists()
 
 
 # --- no OpenCL device ----------------------------------------------------------------------------------
@@ -203,14 +207,17 @@ def test_probe_without_an_opencl_device_says_what_to_install(no_opencl_device):
         assert "PLATFORM_NOT_FOUND_KHR" in reason
 
 
-def test_render_without_an_opencl_device_falls_back_in_one_line(no_opencl_device, tmp_path, capsys, monkeypatch):
+def test_render_without_an_opencl_device_fails_in_one_line(no_opencl_device, tmp_path, capsys, monkeypatch):
     only_reference_after(monkeypatch, "opencl")
     out = tmp_path / "frame.png"
-    code, stdout, stderr = run(capsys, "render", "starter", "--backend", "opencl", *SIZE, "--out", str(out))
-    assert code == 0
+    code, _, stderr = run(capsys, "render", "starter", "--backend", "opencl", *SIZE, "--out", str(out))
+    assert code == 2
     assert len(stderr) == 1, stderr
-    assert stderr[0].startswith("aberrant: opencl backend cannot run here (")
-    assert "install PoCL" in stderr[0] and stderr[0].endswith("; falling back to the reference backend")
+    assert stderr[0].startswith("aberrant: error: opencl backend cannot run here: ")
+    assert "install PoCL" in stderr[0] and stderr[0].endswith("; --backend auto picks one that can")
+    assert not out.exists()
+    code, stdout, stderr = run(capsys, "render", "starter", *SIZE, "--out", str(out))  # auto, the default
+    assert (code, stderr) == (0, ["aberrant: auto chose the reference backend"])
     assert out.is_file() and "with the reference backend" in stdout
 
 
@@ -256,16 +263,28 @@ def test_a_kernel_that_does_not_build_names_the_backend_and_the_compiler_error(b
     assert INJECTED in message and "error" in message
 
 
-def test_cli_falls_back_to_the_reference_when_the_kernel_does_not_build(broken_kernel, tmp_path, capsys):
+def test_cli_falls_back_to_the_reference_when_the_kernel_does_not_build(broken_kernel, tmp_path, capsys, monkeypatch):
+    only_reference_after(monkeypatch, broken_kernel)
     out = tmp_path / "frame.png"
-    code, stdout, stderr = run(capsys, "render", "starter", "--backend", broken_kernel, *SIZE, "--out", str(out))
+    code, stdout, stderr = run(capsys, "render", "starter", "--backend", "auto", *SIZE, "--out", str(out))
     assert code == 0
-    assert len(stderr) == 1, stderr  # (PoCL's own "1 error generated." goes to the C-level stderr, not sys.stderr)
-    line = stderr[0]
+    assert stderr[0] == f"aberrant: auto chose the {broken_kernel} backend"
+    assert len(stderr) == 2, stderr  # (PoCL's own "1 error generated." goes to the C-level stderr, not sys.stderr)
+    line = stderr[1]
     assert line.startswith(f"aberrant: the {broken_kernel} backend failed ({broken_kernel} backend: ")
     assert INJECTED in line and "error" in line
     assert line.endswith("); falling back to the reference backend")
     assert out.is_file() and "with the reference backend" in stdout
+
+
+def test_cli_with_a_named_backend_whose_kernel_does_not_build_fails_in_one_line(broken_kernel, tmp_path, capsys):
+    out = tmp_path / "frame.png"
+    code, _, stderr = run(capsys, "render", "starter", "--backend", broken_kernel, *SIZE, "--out", str(out))
+    assert code == 2
+    [line] = stderr
+    assert line.startswith(f"aberrant: error: {broken_kernel} backend: ") and INJECTED in line
+    assert line.endswith("; --backend auto falls back to one that can")
+    assert not out.exists()
 
 
 def test_editor_keeps_a_build_error_and_can_switch_backend(broken_kernel, starter):
@@ -296,24 +315,27 @@ class FakeBackend(ReferenceBackend):
 
 @pytest.fixture
 def fake_backend(monkeypatch: pytest.MonkeyPatch) -> str:
+    """``auto`` chooses the fake backend (and the reference after it)."""
     monkeypatch.setitem(BACKENDS, "fake", f"{__name__}:FakeBackend")
     monkeypatch.setattr(FakeBackend, "renders", 0)
-    return "fake"
+    only_reference_after(monkeypatch, "fake")
+    return "auto"
 
 
 def test_fallback_message_keeps_the_first_line_and_first_two_errors(fake_backend, tmp_path, capsys):
     out = tmp_path / "frame.png"
-    code, _, stderr = run(capsys, "render", "starter", "--backend", "fake", *SIZE, "--out", str(out))
+    code, _, stderr = run(capsys, "render", "starter", "--backend", "auto", *SIZE, "--out", str(out))
     assert code == 0 and out.is_file()
     assert stderr == [
+        "aberrant: auto chose the fake backend",
         "aberrant: the fake backend failed (fake backend: the kernel does not build: clBuildProgram failed | "
-        "error: first problem | error: second problem); falling back to the reference backend"
+        "error: first problem | error: second problem); falling back to the reference backend",
     ]
 
 
 def test_a_flythrough_falls_back_too(fake_backend, tmp_path, capsys):
     out = tmp_path / "walk.gif"
-    argv = ["render", "starter", "--path", "--frames", "2", "--backend", "fake", *SIZE, "--out", str(out)]
+    argv = ["render", "starter", "--path", "--frames", "2", "--backend", "auto", *SIZE, "--out", str(out)]
     code, stdout, stderr = run(capsys, *argv)
     assert code == 0, stderr
     assert sum(line.startswith("aberrant: the fake backend failed (") for line in stderr) == 1
@@ -325,9 +347,9 @@ def test_a_failure_outside_the_backend_is_an_error_not_a_fallback(fake_backend, 
     """Only the backend's own failures fall back: a scene or argument problem would fail on the reference too."""
     monkeypatch.setattr(systems.app, "render_once", mock.Mock(side_effect=AberrantError("the scene is broken")))
     out = tmp_path / "frame.png"
-    code, _, stderr = run(capsys, "render", "starter", "--backend", "fake", *SIZE, "--out", str(out))
+    code, _, stderr = run(capsys, "render", "starter", "--backend", "auto", *SIZE, "--out", str(out))
     assert code == 2
-    assert stderr == ["aberrant: error: the scene is broken"]
+    assert stderr == ["aberrant: auto chose the fake backend", "aberrant: error: the scene is broken"]
     assert not out.exists()
 
 
@@ -473,16 +495,15 @@ def test_saving_into_a_folder_that_is_a_file(saved):
     assert path.read_bytes() == before
 
 
-def test_write_atomically_is_what_the_tello_importer_and_cli_share():
-    """Every writer in the engine goes through the one atomic writer (so these faults cover them all)."""
+def test_write_atomically_is_what_every_writer_shares():
+    """Every writer goes through the one atomic writer (so these faults cover them all): the scene files
+    (and with them the Tello importer's meshes), the CLI's images, flythrough GIFs."""
     import aberrant.cli
     import aberrant.importers.tello
+    import aberrant.sinks
     import engine.atomic_files
     import engine.scene_file
 
-    assert (
-        aberrant.importers.tello.write_atomically
-        is engine.scene_file.write_atomically
-        is engine.atomic_files.write_atomically
-    )
+    assert aberrant.sinks.write_atomically is engine.scene_file.write_atomically is engine.atomic_files.write_atomically
+    assert "with_files=" in Path(aberrant.importers.tello.__file__).read_text()
     assert "write_atomically" in Path(aberrant.cli.__file__).read_text()

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import aberrant.flythrough as flythrough
+import aberrant.sinks as sinks
 from aberrant.cli import main
-from aberrant.flythrough import default_path, mp4_unavailable, path_for, plan_frames, render_flythrough
+from aberrant.flythrough import default_path, path_for, plan_frames, render_flythrough
 from aberrant.levels import open_level
+from aberrant.sinks import mp4_unavailable
 from backends.base import create_backend
 from components import Transform
 from demos import build_demo
@@ -97,14 +98,14 @@ def test_the_first_frame_is_the_path_start_and_the_camera_ends_at_its_end(backen
 def test_an_interrupted_flythrough_leaves_nothing(backend, tmp_path, monkeypatch, name):
     if name.endswith(".mp4") and mp4_unavailable() is not None:
         pytest.skip(f"cannot write .mp4 here: {mp4_unavailable()}")
-    real_add = flythrough._Sink.add
+    real_add = sinks.Sink.add
 
     def add(self, rgb):
         if self.count == 3:
             raise KeyboardInterrupt
         real_add(self, rgb)
 
-    monkeypatch.setattr(flythrough._Sink, "add", add)
+    monkeypatch.setattr(sinks.Sink, "add", add)
     with pytest.raises(KeyboardInterrupt):
         fly(backend, tmp_path / name)
     assert list(tmp_path.iterdir()) == []
@@ -113,7 +114,7 @@ def test_an_interrupted_flythrough_leaves_nothing(backend, tmp_path, monkeypatch
 def test_an_interrupted_run_keeps_the_old_output(backend, tmp_path, monkeypatch):
     out = tmp_path / "clip.gif"
     out.write_bytes(b"old")
-    monkeypatch.setattr(flythrough._Sink, "commit", lambda self: (_ for _ in ()).throw(RuntimeError("disk full")))
+    monkeypatch.setattr(sinks.Sink, "commit", lambda self: (_ for _ in ()).throw(RuntimeError("disk full")))
     with pytest.raises(RuntimeError):
         fly(backend, out)
     assert out.read_bytes() == b"old"
