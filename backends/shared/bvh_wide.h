@@ -4,33 +4,42 @@
 
 #if BVH_WIDTH >= 4
 /* One traversal for both widths; what differs is named here:
- *   WideNode, realw, RWS(s)   the node record, its real vector type, a vector with every lane s
+ *   WideNode, realw, intw     the node record, its real and int vector types
+ *   RWS(s), CONVERT_INTW(v)   a realw with every lane s, a comparison's lanes as intw
  *   TO_REALW(v)               a node's float vector as realw
  *   BVH_LANE0, BVH_LANES_1(M) the first lane's name, M applied to each other lane's
  *   BVH_LANE_HITS             what the node's lane tests share, computed once per visit
  *   BVH_LANE_HIT(L)           whether the ray enters lane L's box within (t_min, best.t] (slab_hit)
- * Width 8 tests all lanes as vectors, then a lane's branch is one compare: -2 % CPU time per frame
- * on the torus meshes against per-lane scalar tests (PoCL 3.1). No any(hit) before the lanes: PoCL
- * reduces it with shuffles and branches, -2 % on the tori without it. Width 4 keeps per-lane tests,
- * the form GLSL can compile. */
+ * OpenCL C tests all lanes as vectors, then a lane's branch is one compare: against per-lane scalar
+ * tests, -2 % CPU time per frame on the torus meshes at width 8, -1.5 % at width 4 with doubles,
+ * -1 % with floats (PoCL 3.1). No any(hit) before the lanes: PoCL reduces it with shuffles and
+ * branches, -2 % on the tori without it. GLSL keeps per-lane tests (its vector compares give bvecs,
+ * not masks; width 4 is not its default tree, so not measured there). */
 #if BVH_WIDTH == 8
 #define WideNode Bvh8Node
 #define realw real8
+#define intw int8
 #define RWS(s) R8S(s)
+#define CONVERT_INTW(v) convert_int8(v)
 #define TO_REALW(v) TO_REAL8(v)
 #define BVH_LANE0 s0
 #define BVH_LANES_1(M) M(s1) M(s2) M(s3) M(s4) M(s5) M(s6) M(s7)
-#define BVH_LANE_HITS                                                                                   \
-    int8 hit = convert_int8(tf >= max(tn, R8S(t_min))) & convert_int8(tn <= R8S(best.t)) &             \
-               (node.count >= (int8)(0));
-#define BVH_LANE_HIT(L) (hit.L != 0)
 #else
 #define WideNode Bvh4Node
 #define realw real4
+#define intw int4
 #define RWS(s) R4(s, s, s, s)
+#define CONVERT_INTW(v) convert_int4(v)
 #define TO_REALW(v) TO_REAL4(v)
 #define BVH_LANE0 x
 #define BVH_LANES_1(M) M(y) M(z) M(w)
+#endif
+#ifdef __OPENCL_VERSION__
+#define BVH_LANE_HITS                                                                                   \
+    intw hit = CONVERT_INTW(tf >= max(tn, RWS(t_min))) & CONVERT_INTW(tn <= RWS(best.t)) &             \
+               (node.count >= (intw)(0));
+#define BVH_LANE_HIT(L) (hit.L != 0)
+#else
 #define BVH_LANE_HITS
 #define BVH_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t)
 #endif
