@@ -11,12 +11,10 @@ from __future__ import annotations
 import numpy as np
 
 from engine.bvh import Bvh
-from engine.layout import BVH_COMPACT_NODE_DTYPE, BVH_LINK_SHIFT
+from engine.layout import BVH_COMPACT_NODE_DTYPE, BVH_GRID_MAX, BVH_LINK_SHIFT
 
-__all__ = ["GRID_MAX", "compact", "compact_boxes", "compact_frame", "offset_compact"]
+__all__ = ["compact", "compact_boxes", "compact_frame", "offset_compact"]
 
-#: Largest grid coordinate of a compact record (16 bits).
-GRID_MAX = 65535
 _F32_NORMAL = np.float32(np.finfo(np.float32).tiny)
 
 
@@ -51,14 +49,14 @@ def _at_least(q: np.ndarray, origin: np.ndarray, scale: np.ndarray, bound: np.nd
 
 def compact_frame(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(origin, scale)`` float32 of the grid over a root box: ``origin = lo``, and ``origin +
-    GRID_MAX * scale >= hi`` however it is rounded; scale is normal (no flush to zero on a GPU)."""
+    BVH_GRID_MAX * scale >= hi`` however it is rounded; scale is normal (no flush to zero on a GPU)."""
     origin = lo.astype(np.float32)
     # no subnormal origin (a GPU may flush it to 0): 0 below a positive one, -tiny below a negative one
     origin = np.where(np.abs(origin) < _F32_NORMAL, np.where(origin > 0, 0.0, -_F32_NORMAL), origin)
     origin = np.where(lo.astype(np.float32) == 0, lo.astype(np.float32), origin).astype(np.float32)
     extent = hi.astype(np.float64) - origin.astype(np.float64)
-    scale = np.maximum(np.float32(extent / GRID_MAX), _F32_NORMAL).astype(np.float32)
-    top = np.full(3, GRID_MAX)
+    scale = np.maximum(np.float32(extent / BVH_GRID_MAX), _F32_NORMAL).astype(np.float32)
+    top = np.full(3, BVH_GRID_MAX)
     for step in range(80):  # a few ulps, then doubling (where the top lands on a subnormal)
         short = ~_at_least(top, origin, scale, hi.astype(np.float32))
         if not short.any():
@@ -78,8 +76,8 @@ def compact_boxes(
     with np.errstate(divide="ignore", invalid="ignore"):
         rel_lo = (lo32.astype(np.float64) - origin) / scale.astype(np.float64)
         rel_hi = (hi32.astype(np.float64) - origin) / scale.astype(np.float64)
-    qlo = np.clip(np.nan_to_num(np.floor(rel_lo), nan=0.0), 0, GRID_MAX).astype(np.int64)
-    qhi = np.clip(np.nan_to_num(np.ceil(rel_hi), nan=GRID_MAX), 0, GRID_MAX).astype(np.int64)
+    qlo = np.clip(np.nan_to_num(np.floor(rel_lo), nan=0.0), 0, BVH_GRID_MAX).astype(np.int64)
+    qhi = np.clip(np.nan_to_num(np.ceil(rel_hi), nan=BVH_GRID_MAX), 0, BVH_GRID_MAX).astype(np.int64)
     for _ in range(4):
         bad = ~_at_most(qlo, origin, scale, lo32)
         if not bad.any():
@@ -90,8 +88,8 @@ def compact_boxes(
         bad = ~_at_least(qhi, origin, scale, hi32)
         if not bad.any():
             break
-        qhi = np.where(bad, np.minimum(qhi + 1, GRID_MAX), qhi)
-    qhi = np.where(_at_least(qhi, origin, scale, hi32), qhi, GRID_MAX)
+        qhi = np.where(bad, np.minimum(qhi + 1, BVH_GRID_MAX), qhi)
+    qhi = np.where(_at_least(qhi, origin, scale, hi32), qhi, BVH_GRID_MAX)
     return qlo, qhi
 
 

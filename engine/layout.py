@@ -1,11 +1,14 @@
 """GPU data layouts, declared once.
 
 Every table the tracers read is a NumPy structured dtype whose bytes go
-unchanged into a std430 shader storage buffer and an OpenCL buffer. The
-kernels declare the same records in ``backends/shared/layout.h`` built from
-4-component vectors only (``real4`` / ``int4``), which is the subset on which
-std430 and OpenCL C agree. Tests assert offsets and sizes against the std430
-rules, so a drift between host and kernel is caught on the host.
+unchanged into a std430 shader storage buffer and an OpenCL buffer. Each record
+is declared here once, as a :class:`Record` of 4-vector fields (``real4`` /
+``float4`` / ``int4``; 8-vectors for the 8-wide BVH, OpenCL only), the subset
+on which std430 and OpenCL C agree. Both sides come from that declaration: the
+host's dtype (:meth:`Record.dtype`) and the kernels' struct, which
+``backends/shared/layout_h.py`` writes into the kernel source as ``layout.h``,
+so host and kernel cannot drift apart. Tests assert offsets and sizes against
+the std430 rules, and that the written structs read the dtypes' bytes.
 
 Two families exist:
 
@@ -22,10 +25,14 @@ Two families exist:
   their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
   for f64), as std430 and OpenCL C both do.
+
+A new record is one :class:`Record` added to :data:`RECORDS` (its kernel struct
+follows), plus the table's row in :data:`TABLES` and :func:`table_dtype`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
@@ -33,61 +40,102 @@ import numpy as np
 Precision = Literal["f32", "f64"]
 PRECISIONS: tuple[Precision, ...] = ("f32", "f64")
 
-# (field name, kind, rows): kind is "real4", "int4" or "float4" (always
-# 32-bit); rows > 1 makes a matrix of that many 4-vector rows.
-FieldSpec = tuple[str, str, int]
+#: A field's vector type in the kernels: ``real4`` follows the precision, the others are always 32-bit;
+#: ``float8`` / ``int8`` exist in OpenCL C only (two 4-vector rows on the host).
+Kind = Literal["real4", "float4", "int4", "float8", "int8"]
+_LANES: dict[str, int] = {"real4": 4, "float4": 4, "int4": 4, "float8": 8, "int8": 8}
 
 
-def _build(fields: list[FieldSpec], precision: Precision) -> np.dtype:
-    """A dtype of 4-vectors with std430 offsets, padded to its alignment."""
-    real = np.float64 if precision == "f64" else np.float32
-    names: list[str] = []
-    formats: list[object] = []
-    offsets: list[int] = []
-    offset = 0
-    align = 16
-    for name, kind, rows in fields:
-        if kind == "real4":
-            base = np.dtype(real)
-        elif kind == "float4":
-            base = np.dtype(np.float32)
-        elif kind == "int4":
-            base = np.dtype(np.int32)
-        else:  # pragma: no cover - a programming error in this file
-            raise ValueError(f"unknown field kind {kind!r}")
-        size = 4 * base.itemsize
-        align = max(align, size)
-        offset = -(-offset // size) * size
-        names.append(name)
-        formats.append((base, (rows, 4) if rows > 1 else (4,)))
-        offsets.append(offset)
-        offset += size * rows
-    itemsize = -(-offset // align) * align
-    return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
+@dataclass(frozen=True)
+class Field:
+    """One field of a record: a dtype field and the kernel struct member(s) reading its bytes.
+
+    ``rows > 1``: a matrix of 4-vector rows, the members ``member0``, ``member1``, ... (``member``
+    defaults to ``name``). ``w``: a ``float4`` whose ``w`` holds an int32 bit pattern (the kernel reads
+    it with ``AS_INT``); the host sees ``name`` as three float32 and ``w`` as an int32 field.
+    """
+
+    name: str
+    kind: Kind
+    rows: int = 1
+    member: str = ""
+    w: str = ""
+
+    def kernel_members(self) -> list[tuple[str, str]]:
+        """(kernel type, member name) of each vector this field is in the kernel's struct."""
+        member = self.member or self.name
+        if self.rows == 1:
+            return [(self.kind, member)]
+        return [(self.kind, f"{member}{row}") for row in range(self.rows)]
+
+
+@dataclass(frozen=True)
+class Record:
+    """A packed record, declared once: ``struct`` is its name in the kernels, ``fields`` its vectors in order."""
+
+    struct: str
+    fields: tuple[Field, ...]
+
+    def dtype(self, precision: Precision = "f32") -> np.dtype:
+        """The record's dtype: each vector at its std430 offset, the whole padded to its widest vector."""
+        real = np.float64 if precision == "f64" else np.float32
+        names: list[str] = []
+        formats: list[object] = []
+        offsets: list[int] = []
+        offset = 0
+        align = 16
+        for field in self.fields:
+            base = np.dtype(real if field.kind == "real4" else np.int32 if field.kind.startswith("int") else np.float32)
+            lanes = _LANES[field.kind]
+            size = lanes * base.itemsize
+            align = max(align, size)
+            offset = -(-offset // size) * size
+            if field.w:
+                if field.kind != "float4" or field.rows != 1:  # pragma: no cover - a programming error in this file
+                    raise ValueError(f"{self.struct}.{field.name}: only a single float4 has an int w")
+                names += [field.name, field.w]
+                formats += [(np.float32, (3,)), np.int32]
+                offsets += [offset, offset + 12]
+            else:
+                shape = (field.rows, 4) if field.rows > 1 else (lanes // 4, 4) if lanes > 4 else (4,)
+                names.append(field.name)
+                formats.append((base, shape))
+                offsets.append(offset)
+            offset += size * field.rows
+        itemsize = -(-offset // align) * align
+        return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
+
+    def kernel_members(self) -> list[tuple[str, str]]:
+        """(kernel type, member name) of the struct's members, in order."""
+        return [member for field in self.fields for member in field.kernel_members()]
+
+
+def _vectors(kind: Kind, *names: str) -> tuple[Field, ...]:
+    """Fields of one kind, one vector each."""
+    return tuple(Field(name, kind) for name in names)
 
 
 # --- 32-bit tables -----------------------------------------------------------
 
 #: One triangle of a mesh asset, object space. ``w`` components are unused.
-TRIANGLE_DTYPE = _build([("v0", "float4", 1), ("v1", "float4", 1), ("v2", "float4", 1)], "f32")
+TRIANGLE = Record("Triangle", _vectors("float4", "v0", "v1", "v2"))
+TRIANGLE_DTYPE = TRIANGLE.dtype()
 
 #: Texture coordinates of a triangle: ``uv01 = (u0, v0, u1, v1)``, ``uv2 = (u2, v2, 0, 0)``.
-TRIANGLE_UV_DTYPE = _build([("uv01", "float4", 1), ("uv2", "float4", 1)], "f32")
+TRIANGLE_UV = Record("TriangleUv", _vectors("float4", "uv01", "uv2"))
+TRIANGLE_UV_DTYPE = TRIANGLE_UV.dtype()
 
 #: A BVH node, 32 bytes, read by kernels as two 4-vectors whose ``w`` holds an
-#: int32 bit pattern: ``bounds_min.xyz`` + ``first``, ``bounds_max.xyz`` +
-#: ``count``. ``count > 0``: a leaf over triangles ``[first, first + count)``;
+#: int32 bit pattern: ``lo = (bounds_min.xyz, first)``, ``hi = (bounds_max.xyz,
+#: count)``. ``count > 0``: a leaf over triangles ``[first, first + count)``;
 #: ``count == 0``: an interior node whose children are ``first`` and
 #: ``first + 1``. Bounds are rounded outward to float32. Indices are absolute in
 #: the packed scene (the packer adds each asset's offsets).
-BVH_NODE_DTYPE = np.dtype(
-    {
-        "names": ["bounds_min", "first", "bounds_max", "count"],
-        "formats": [(np.float32, (3,)), np.int32, (np.float32, (3,)), np.int32],
-        "offsets": [0, 12, 16, 28],
-        "itemsize": 32,
-    }
+BVH_NODE = Record(
+    "BvhNode",
+    (Field("bounds_min", "float4", member="lo", w="first"), Field("bounds_max", "float4", member="hi", w="count")),
 )
+BVH_NODE_DTYPE = BVH_NODE.dtype()
 
 #: A 4-wide BVH node (``ScenePacker(bvh_width=4)``), 128 bytes: the boxes of its
 #: four children stored SoA, one ``float4`` per bound component (lane i = child
@@ -99,26 +147,19 @@ BVH_NODE_DTYPE = np.dtype(
 #: ``count < 0``, an empty slot (its box is a point at the origin: the count,
 #: not the box, rules it out). Children keep the binary tree's left-to-right
 #: order. Bounds are rounded outward; indices are absolute in the packed scene.
-BVH4_NODE_DTYPE = _build(
-    [
-        ("lo_x", "float4", 1),
-        ("lo_y", "float4", 1),
-        ("lo_z", "float4", 1),
-        ("hi_x", "float4", 1),
-        ("hi_y", "float4", 1),
-        ("hi_z", "float4", 1),
-        ("child", "int4", 1),
-        ("count", "int4", 1),
-    ],
-    "f32",
+BVH4_NODE = Record(
+    "Bvh4Node",
+    (*_vectors("float4", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *_vectors("int4", "child", "count")),
 )
+BVH4_NODE_DTYPE = BVH4_NODE.dtype()
 
 #: Four triangles of one wide-BVH leaf, SoA (lane i = triangle i): ``v0x = (v0.x of each)``, ... so the
 #: watertight test runs on four at once. ``index`` holds each lane's row in ``triangles`` (shading and
 #: ties use it), -1 for a padding lane. Only built with ``bvh_width=4``, whose leaves point at blocks.
-TRIANGLE_BLOCK_DTYPE = _build(
-    [(f"v{k}{axis}", "float4", 1) for k in range(3) for axis in "xyz"] + [("index", "int4", 1)], "f32"
+TRIANGLE_BLOCK = Record(
+    "TriangleBlock", (*_vectors("float4", *(f"v{k}{axis}" for k in range(3) for axis in "xyz")), Field("index", "int4"))
 )
+TRIANGLE_BLOCK_DTYPE = TRIANGLE_BLOCK.dtype()
 
 #: A compact binary BVH record (``ScenePacker(bvh_compact=True)``, GLSL): an interior node as the
 #: boxes of BOTH its children, 32 bytes, so a visit is 2 texel loads instead of 4 (two children's
@@ -130,31 +171,28 @@ TRIANGLE_BLOCK_DTYPE = _build(
 #: ``count == 0``, the record ``index``. Each asset's records start with a header:
 #: ``child0 = (origin.xyz bits, root link)``, ``child1 = (scale.xyz bits, -1)``; its root box is
 #: the whole grid. Indices are absolute in the packed scene.
-BVH_COMPACT_NODE_DTYPE = _build([("child0", "int4", 1), ("child1", "int4", 1)], "f32")
+BVH_COMPACT_NODE = Record("BvhCompactNode", _vectors("int4", "child0", "child1"))
+BVH_COMPACT_NODE_DTYPE = BVH_COMPACT_NODE.dtype()
 
 #: Bits of a compact link below its index: leaf counts up to 64 (``BvhParams.max_leaf_size``).
 BVH_LINK_SHIFT = 7
+#: The largest 16-bit grid coordinate of a compact record's box.
+BVH_GRID_MAX = 65535
 
 #: An 8-wide BVH node (``ScenePacker(bvh_width=8)``, OpenCL only: GLSL has no 8-vectors), 256 bytes:
 #: :data:`BVH4_NODE_DTYPE` with eight lanes, each field two 4-vector rows (row 0 = lanes 0-3), which
 #: are the bytes of the ``float8`` / ``int8`` the kernel reads (32-byte aligned: every offset is a
 #: multiple of 32). Leaves name ``ceil(count / 4)`` rows of ``triangle_blocks``, as with width 4.
-BVH8_NODE_DTYPE = _build(
-    [
-        ("lo_x", "float4", 2),
-        ("lo_y", "float4", 2),
-        ("lo_z", "float4", 2),
-        ("hi_x", "float4", 2),
-        ("hi_y", "float4", 2),
-        ("hi_z", "float4", 2),
-        ("child", "int4", 2),
-        ("count", "int4", 2),
-    ],
-    "f32",
+BVH8_NODE = Record(
+    "Bvh8Node",
+    (*_vectors("float8", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *_vectors("int8", "child", "count")),
 )
+BVH8_NODE_DTYPE = BVH8_NODE.dtype()
 
+#: The ``bvh_nodes`` record of each supported BVH width (binary: :data:`BVH_COMPACT_NODE` when compact).
+BVH_RECORDS: dict[int, Record] = {2: BVH_NODE, 4: BVH4_NODE, 8: BVH8_NODE}
 #: The ``bvh_nodes`` dtype of each supported BVH width.
-BVH_WIDTHS: dict[int, np.dtype] = {2: BVH_NODE_DTYPE, 4: BVH4_NODE_DTYPE, 8: BVH8_NODE_DTYPE}
+BVH_WIDTHS: dict[int, np.dtype] = {width: record.dtype() for width, record in BVH_RECORDS.items()}
 
 
 def bvh_width(nodes: np.ndarray) -> int:
@@ -176,121 +214,136 @@ def bvh_compact(nodes: np.ndarray) -> bool:
 #: A node of the top-level tree over instances (``engine.tlas``), the BVH node's 32 bytes:
 #: ``count == 1``: a leaf over instance row ``first``; ``count == 0``: an interior node whose
 #: children are ``first`` and ``first + 1``. Bounds are float32 rounded outward, a leaf's the
-#: instance's world bounds grown by a margin (the exact ones are on the instance row).
+#: instance's world bounds grown by a margin (the exact ones are on the instance row). Root at row 0.
+TLAS_NODE = Record("TlasNode", BVH_NODE.fields)
 TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
-MATERIAL_DTYPE = _build([("color", "float4", 1), ("flags", "int4", 1)], "f32")
+MATERIAL = Record("Material", (Field("color", "float4"), Field("flags", "int4")))
+MATERIAL_DTYPE = MATERIAL.dtype()
 
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
 #: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
 #: aberrations, portals, max_events)``.
-SETTINGS_DTYPE = _build(
-    [
-        ("background", "float4", 1),
-        ("light_dir", "float4", 1),
-        ("event_limit_color", "float4", 1),
-        ("shading", "float4", 1),
-        ("counts", "int4", 1),
-    ],
-    "f32",
+SETTINGS = Record(
+    "Settings",
+    (*_vectors("float4", "background", "light_dir", "event_limit_color", "shading"), Field("counts", "int4")),
 )
+SETTINGS_DTYPE = SETTINGS.dtype()
 
 
 # --- real tables (float32 or float64) ----------------------------------------
 
+#: A mesh entity placed in the scene: ``world_to_object`` rows (3x4 affine, camera-relative world to
+#: object space), world-space bounds (camera-relative; ``w`` unused) and ``meta = (bvh_root, material,
+#: entity, flags)`` with flags bit 0 (:data:`INSTANCE_FLAG_HAS_UVS`): the asset has UVs.
+INSTANCE = Record(
+    "Instance",
+    (
+        Field("world_to_object", "real4", 3, member="w2o"),
+        *_vectors("real4", "bounds_min", "bounds_max"),
+        Field("meta", "int4"),
+    ),
+)
+
+#: An aberration box: ``world_to_local`` rows map camera-relative world points into the unit box
+#: [-1/2, 1/2]^3; ``rotation`` rows are the box's rotation R (``w`` of row 0: the box's clearance to
+#: every instance, of row 1: its gap to every other box, engine/box_clearance.py); ``deformation.xyz``
+#: is D; ``meta = (mode, exit, priority, entity)``. Rows are sorted by (priority, entity): the active
+#: box at a point is the *last* row that contains it.
+ABERRATION = Record(
+    "Aberration",
+    (
+        Field("world_to_local", "real4", 3, member="w2l"),
+        Field("rotation", "real4", 3, member="rot"),
+        Field("deformation", "real4"),
+        Field("meta", "int4"),
+    ),
+)
+
+#: A portal quad: ``world_to_local`` rows map camera-relative world points into the quad's space
+#: ([-1, 1]^2 at z = 0); ``transfer`` rows are ``X = M_target M_self^-1`` in camera-relative
+#: coordinates (its 3x3 part is the direction map L); ``meta = (target_row, entity, 0, 0)``,
+#: target_row -1 when unlinked.
+PORTAL = Record(
+    "Portal",
+    (
+        Field("world_to_local", "real4", 3, member="w2l"),
+        Field("transfer", "real4", 3),
+        Field("meta", "int4"),
+    ),
+)
+
+#: The per-frame camera, one row: ``position.xyz`` is camera-relative (the packed origin subtracted);
+#: ``right``, ``up``, ``back`` are the columns of R_cam; ``origin.xyz`` is the packed origin (for
+#: world-space checkers); ``sigma_min``/``sigma_max`` are the radial mode's corner-ray bounds m_k, M_k;
+#: ``lens = (tan(fov/2), aspect, clearance, 0)``, the camera's distance to every instance's bounds
+#: (``box_clearance``); ``size = (width, height, camera box, 0)``, the camera box being every primary
+#: ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``).
+CAMERA = Record(
+    "Camera",
+    (
+        *_vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens"),
+        Field("size", "int4"),
+    ),
+)
+
 
 def instance_dtype(precision: Precision) -> np.dtype:
-    """A mesh entity placed in the scene.
-
-    ``world_to_object`` rows (3x4 affine, camera-relative world to object
-    space), world-space bounds (camera-relative; ``w`` unused) and
-    ``meta = (bvh_root, material, entity, flags)`` with flags bit 0: the asset
-    has UVs.
-    """
-    return _build(
-        [
-            ("world_to_object", "real4", 3),
-            ("bounds_min", "real4", 1),
-            ("bounds_max", "real4", 1),
-            ("meta", "int4", 1),
-        ],
-        precision,
-    )
+    """The ``instances`` row at a precision (:data:`INSTANCE`)."""
+    return INSTANCE.dtype(precision)
 
 
 def aberration_dtype(precision: Precision) -> np.dtype:
-    """An aberration box.
-
-    ``world_to_local`` rows map camera-relative world points into the unit box
-    [-1/2, 1/2]^3; ``rotation`` rows are the box's rotation R (``w`` of row 0: the box's
-    clearance to every instance, of row 1: its gap to every other box, engine/box_clearance.py);
-    ``deformation.xyz`` is D; ``meta = (mode, exit, priority, entity)``.
-    Rows are sorted by (priority, entity): the active box at a point is the
-    *last* row that contains it.
-    """
-    return _build(
-        [
-            ("world_to_local", "real4", 3),
-            ("rotation", "real4", 3),
-            ("deformation", "real4", 1),
-            ("meta", "int4", 1),
-        ],
-        precision,
-    )
+    """The ``aberrations`` row at a precision (:data:`ABERRATION`)."""
+    return ABERRATION.dtype(precision)
 
 
 def portal_dtype(precision: Precision) -> np.dtype:
-    """A portal quad.
-
-    ``world_to_local`` rows map camera-relative world points into the quad's
-    space ([-1, 1]^2 at z = 0); ``transfer`` rows are ``X = M_target M_self^-1``
-    in camera-relative coordinates (its 3x3 part is the direction map L);
-    ``meta = (target_row, entity, 0, 0)``, target_row -1 when unlinked.
-    """
-    return _build(
-        [
-            ("world_to_local", "real4", 3),
-            ("transfer", "real4", 3),
-            ("meta", "int4", 1),
-        ],
-        precision,
-    )
+    """The ``portals`` row at a precision (:data:`PORTAL`)."""
+    return PORTAL.dtype(precision)
 
 
 def camera_dtype(precision: Precision) -> np.dtype:
-    """Per-frame camera.
+    """The ``camera`` row at a precision (:data:`CAMERA`)."""
+    return CAMERA.dtype(precision)
 
-    ``position.xyz`` is camera-relative (the packed origin subtracted);
-    ``right``, ``up``, ``back`` are the columns of R_cam; ``origin.xyz`` is the
-    packed origin (for world-space checkers); ``sigma_min``/``sigma_max`` are
-    the radial mode's corner-ray bounds m_k, M_k; ``lens = (tan(fov/2),
-    aspect, clearance, 0)``, the camera's distance to every instance's bounds
-    (``box_clearance``); ``size = (width, height, camera box, 0)``, the camera box being
-    every primary ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``).
-    """
-    return _build(
-        [
-            ("position", "real4", 1),
-            ("right", "real4", 1),
-            ("up", "real4", 1),
-            ("back", "real4", 1),
-            ("origin", "real4", 1),
-            ("sigma_min", "real4", 1),
-            ("sigma_max", "real4", 1),
-            ("lens", "real4", 1),
-            ("size", "int4", 1),
-        ],
-        precision,
-    )
 
+#: Every record the kernels declare, in the order ``layout.h`` declares them.
+RECORDS: tuple[Record, ...] = (
+    SETTINGS,
+    TRIANGLE,
+    TRIANGLE_UV,
+    BVH_NODE,
+    BVH4_NODE,
+    BVH_COMPACT_NODE,
+    BVH8_NODE,
+    TRIANGLE_BLOCK,
+    MATERIAL,
+    INSTANCE,
+    ABERRATION,
+    PORTAL,
+    TLAS_NODE,
+    CAMERA,
+)
 
 # Mode and exit codes shared by the packer and every kernel.
 ABERRATION_MODES: dict[str, int] = {"metric": 0, "radial": 1, "additive": 2}
 ABERRATION_EXITS: dict[str, int] = {"restore": 0, "repeat": 1, "invert": 2}
 
 INSTANCE_FLAG_HAS_UVS = 1
+
+#: Integer constants of the records that the kernels see as ``#define``\ s (``layout.h``): link and grid
+#: bits of compact BVH records, box modes and exit rules, instance flags.
+KERNEL_CONSTANTS: dict[str, int] = {
+    "BVH_LINK_SHIFT": BVH_LINK_SHIFT,
+    "BVH_LINK_MASK": (1 << BVH_LINK_SHIFT) - 1,
+    "BVH_GRID_MAX": BVH_GRID_MAX,
+    **{f"MODE_{name.upper()}": code for name, code in ABERRATION_MODES.items()},
+    **{f"EXIT_{name.upper()}": code for name, code in ABERRATION_EXITS.items()},
+    "INSTANCE_FLAG_HAS_UVS": INSTANCE_FLAG_HAS_UVS,
+}
 
 #: Names of the packed tables, in the binding order every backend uses.
 TABLES: tuple[str, ...] = (

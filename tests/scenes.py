@@ -283,13 +283,14 @@ TABLE_STRUCTS = {
     "portals": "Portal",
     "triangle_blocks": "TriangleBlock",
     "camera": "Camera",
+    "tlas_nodes": "TlasNode",
     "bvh4_nodes": "Bvh4Node",  # bvh_nodes packed with bvh_width=4
     "bvh_compact_nodes": "BvhCompactNode",  # bvh_nodes packed with bvh_compact=True
 }
 
 
 def layout_members(struct: str) -> list[tuple[str, str]]:
-    """(type, name) of a record's members, parsed from the shared layout.h."""
+    """(type, name) of a record's members, parsed from the shared layout.h (as the kernels get it)."""
     text = shared.read("layout.h")
     body = re.search(rf"STRUCT_BEGIN\({struct}\)(.*?)STRUCT_END\({struct}\)", text, re.S)
     assert body is not None, struct

@@ -43,164 +43,24 @@ dvec4 dvec4_from_texels_(uvec4 a, uvec4 b)
 #define R4_AT_(img, i) uintBitsToFloat(TEXEL_(img, i))
 #endif
 
-Settings fetch_settings_()
-{
-    Settings s;
-    s.background = F4_AT_(settings_img, 0);
-    s.light_dir = F4_AT_(settings_img, 1);
-    s.event_limit_color = F4_AT_(settings_img, 2);
-    s.shading = F4_AT_(settings_img, 3);
-    s.counts = I4_AT_(settings_img, 4);
-    return s;
-}
-
-Triangle fetch_triangle_(int i)
-{
-    int b = i * TRIANGLES_STRIDE;
-    Triangle t;
-    t.v0 = F4_AT_(triangles_img, b);
-    t.v1 = F4_AT_(triangles_img, b + 1);
-    t.v2 = F4_AT_(triangles_img, b + 2);
-    return t;
-}
-
-TriangleUv fetch_triangle_uv_(int i)
-{
-    int b = i * TRIANGLE_UVS_STRIDE;
-    TriangleUv t;
-    t.uv01 = F4_AT_(triangle_uvs_img, b);
-    t.uv2 = F4_AT_(triangle_uvs_img, b + 1);
-    return t;
-}
-
+/* Each record from its texels (layout.h's <struct>_from_texels, written from engine.layout). */
+Settings fetch_settings_() { return Settings_from_texels(settings_img, 0); }
+Triangle fetch_triangle_(int i) { return Triangle_from_texels(triangles_img, i * TRIANGLES_STRIDE); }
+TriangleUv fetch_triangle_uv_(int i) { return TriangleUv_from_texels(triangle_uvs_img, i * TRIANGLE_UVS_STRIDE); }
 #if BVH_WIDTH == 8
 #error "BVH_WIDTH 8 is OpenCL only (GLSL has no 8-vectors)"
-#elif BVH_WIDTH == 4
-Bvh4Node fetch_bvh_node_(int i)
-{
-    int b = i * BVH_NODES_STRIDE;
-    Bvh4Node n;
-    n.lo_x = F4_AT_(bvh_nodes_img, b);
-    n.lo_y = F4_AT_(bvh_nodes_img, b + 1);
-    n.lo_z = F4_AT_(bvh_nodes_img, b + 2);
-    n.hi_x = F4_AT_(bvh_nodes_img, b + 3);
-    n.hi_y = F4_AT_(bvh_nodes_img, b + 4);
-    n.hi_z = F4_AT_(bvh_nodes_img, b + 5);
-    n.child = I4_AT_(bvh_nodes_img, b + 6);
-    n.count = I4_AT_(bvh_nodes_img, b + 7);
-    return n;
-}
-#elif BVH_COMPACT
-BvhCompactNode fetch_bvh_node_(int i)
-{
-    int b = i * BVH_NODES_STRIDE;
-    BvhCompactNode n;
-    n.child0 = I4_AT_(bvh_nodes_img, b);
-    n.child1 = I4_AT_(bvh_nodes_img, b + 1);
-    return n;
-}
-#else
-BvhNode fetch_bvh_node_(int i)
-{
-    int b = i * BVH_NODES_STRIDE;
-    BvhNode n;
-    n.lo = F4_AT_(bvh_nodes_img, b);
-    n.hi = F4_AT_(bvh_nodes_img, b + 1);
-    return n;
-}
 #endif
-
+BvhRow fetch_bvh_node_(int i) { return BvhRow_from_texels(bvh_nodes_img, i * BVH_NODES_STRIDE); }
 TriangleBlock fetch_triangle_block_(int i)
 {
-    int b = i * TRIANGLE_BLOCKS_STRIDE;
-    TriangleBlock t;
-    t.v0x = F4_AT_(triangle_blocks_img, b);
-    t.v0y = F4_AT_(triangle_blocks_img, b + 1);
-    t.v0z = F4_AT_(triangle_blocks_img, b + 2);
-    t.v1x = F4_AT_(triangle_blocks_img, b + 3);
-    t.v1y = F4_AT_(triangle_blocks_img, b + 4);
-    t.v1z = F4_AT_(triangle_blocks_img, b + 5);
-    t.v2x = F4_AT_(triangle_blocks_img, b + 6);
-    t.v2y = F4_AT_(triangle_blocks_img, b + 7);
-    t.v2z = F4_AT_(triangle_blocks_img, b + 8);
-    t.index = I4_AT_(triangle_blocks_img, b + 9);
-    return t;
+    return TriangleBlock_from_texels(triangle_blocks_img, i * TRIANGLE_BLOCKS_STRIDE);
 }
-
-Material fetch_material_(int i)
-{
-    int b = i * MATERIALS_STRIDE;
-    Material m;
-    m.color = F4_AT_(materials_img, b);
-    m.flags = I4_AT_(materials_img, b + 1);
-    return m;
-}
-
-Instance fetch_instance_(int i)
-{
-    int b = i * INSTANCES_STRIDE;
-    Instance r;
-    r.w2o0 = R4_AT_(instances_img, b);
-    r.w2o1 = R4_AT_(instances_img, b + R4_TEXELS_);
-    r.w2o2 = R4_AT_(instances_img, b + 2 * R4_TEXELS_);
-    r.bounds_min = R4_AT_(instances_img, b + 3 * R4_TEXELS_);
-    r.bounds_max = R4_AT_(instances_img, b + 4 * R4_TEXELS_);
-    r.meta = I4_AT_(instances_img, b + 5 * R4_TEXELS_);
-    return r;
-}
-
-Aberration fetch_aberration_(int i)
-{
-    int b = i * ABERRATIONS_STRIDE;
-    Aberration r;
-    r.w2l0 = R4_AT_(aberrations_img, b);
-    r.w2l1 = R4_AT_(aberrations_img, b + R4_TEXELS_);
-    r.w2l2 = R4_AT_(aberrations_img, b + 2 * R4_TEXELS_);
-    r.rot0 = R4_AT_(aberrations_img, b + 3 * R4_TEXELS_);
-    r.rot1 = R4_AT_(aberrations_img, b + 4 * R4_TEXELS_);
-    r.rot2 = R4_AT_(aberrations_img, b + 5 * R4_TEXELS_);
-    r.deformation = R4_AT_(aberrations_img, b + 6 * R4_TEXELS_);
-    r.meta = I4_AT_(aberrations_img, b + 7 * R4_TEXELS_);
-    return r;
-}
-
-Portal fetch_portal_(int i)
-{
-    int b = i * PORTALS_STRIDE;
-    Portal r;
-    r.w2l0 = R4_AT_(portals_img, b);
-    r.w2l1 = R4_AT_(portals_img, b + R4_TEXELS_);
-    r.w2l2 = R4_AT_(portals_img, b + 2 * R4_TEXELS_);
-    r.transfer0 = R4_AT_(portals_img, b + 3 * R4_TEXELS_);
-    r.transfer1 = R4_AT_(portals_img, b + 4 * R4_TEXELS_);
-    r.transfer2 = R4_AT_(portals_img, b + 5 * R4_TEXELS_);
-    r.meta = I4_AT_(portals_img, b + 6 * R4_TEXELS_);
-    return r;
-}
-
-TlasNode fetch_tlas_node_(int i)
-{
-    int b = i * TLAS_NODES_STRIDE;
-    TlasNode n;
-    n.lo = F4_AT_(tlas_nodes_img, b);
-    n.hi = F4_AT_(tlas_nodes_img, b + 1);
-    return n;
-}
-
-Camera fetch_camera_()
-{
-    Camera c;
-    c.position = R4_AT_(camera_img, 0);
-    c.right = R4_AT_(camera_img, R4_TEXELS_);
-    c.up = R4_AT_(camera_img, 2 * R4_TEXELS_);
-    c.back = R4_AT_(camera_img, 3 * R4_TEXELS_);
-    c.origin = R4_AT_(camera_img, 4 * R4_TEXELS_);
-    c.sigma_min = R4_AT_(camera_img, 5 * R4_TEXELS_);
-    c.sigma_max = R4_AT_(camera_img, 6 * R4_TEXELS_);
-    c.lens = R4_AT_(camera_img, 7 * R4_TEXELS_);
-    c.size = I4_AT_(camera_img, 8 * R4_TEXELS_);
-    return c;
-}
+Material fetch_material_(int i) { return Material_from_texels(materials_img, i * MATERIALS_STRIDE); }
+Instance fetch_instance_(int i) { return Instance_from_texels(instances_img, i * INSTANCES_STRIDE); }
+Aberration fetch_aberration_(int i) { return Aberration_from_texels(aberrations_img, i * ABERRATIONS_STRIDE); }
+Portal fetch_portal_(int i) { return Portal_from_texels(portals_img, i * PORTALS_STRIDE); }
+TlasNode fetch_tlas_node_(int i) { return TlasNode_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
+Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
 
 /* Table access: a record (fetched whole; the compiler drops the loads of unused fields). */
 #define SETTINGS (fetch_settings_())

@@ -6,7 +6,9 @@ OpenCL C 1.2. A backend assembles a program as::
     defines + its language prelude + layout.h + its bindings + core.h + its main
 
 where the prelude maps the core's types and helpers to the language
-(``backends/glsl/prelude.glsl``, ``prelude_cl.h`` here) and the bindings say
+(``backends/glsl/prelude.glsl``, ``prelude_cl.h`` here), ``layout.h`` declares the
+packed records (written from ``engine.layout``'s declarations, ``layout_h.py``, not
+stored) and the bindings say
 how the packed tables are reached (GLSL: storage-buffer arrays, or RGBA32UI
 images on llvmpipe, ``backends/glsl/bindings.glsl``; OpenCL: a struct of
 ``__global`` pointers, ``bindings_cl.h``). See ``core.h`` for the
@@ -15,7 +17,7 @@ macros a prelude must provide.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
 
 import numpy as np
@@ -23,6 +25,8 @@ import numpy as np
 from engine import layout
 from engine.box_clearance import instance_bounds
 from engine.packed import Features, PackedScene
+
+from .layout_h import layout_h
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
 #: and its bindings: each builds on those before it (core.h's records and helpers first, the
@@ -39,8 +43,15 @@ TRACER_FILES: tuple[str, ...] = (
 )
 
 
+#: Kernel files written from the host's declarations rather than stored: name -> the function writing them.
+GENERATED: dict[str, Callable[[], str]] = {"layout.h": layout_h}
+
+
 def read(name: str, package: str = __name__) -> str:
-    """The text of a kernel file shipped beside a backend (``importlib.resources``, so it works zipped too)."""
+    """The text of a kernel file shipped beside a backend (``importlib.resources``, so it works zipped too),
+    or of one of this package's :data:`GENERATED` files."""
+    if package == __name__ and name in GENERATED:
+        return GENERATED[name]()
     return resources.files(package).joinpath(name).read_text(encoding="utf-8")
 
 

@@ -56,7 +56,7 @@ FORCE_INLINE CompactFrame compact_frame(float3 origin, float3 scale, real3 o, re
     return f;
 }
 
-/* Entry and exit t of a compact record's child box (16-bit grid coordinates c.xyz, see layout.h):
+/* Entry and exit t of a compact record's child box (16-bit grid coordinates c.xyz, see engine/layout.py):
  * 6 multiply-adds in the ray's frame (compact_frame) instead of decoding the box and slab(): -1 % CPU
  * per frame on the tori (llvmpipe; the traversal's control flow, not its arithmetic, dominates). */
 FORCE_INLINE real2 compact_slab(int4 c, CompactFrame f)

@@ -142,13 +142,6 @@
 /* Radial mode: an axis whose corner-ray range is narrower than this uses sigma_k = sign(v_k). */
 #define COLLAPSED_RANGE REAL_C(1.0e-6)
 
-/* Aberration modes and exit rules (engine.layout.ABERRATION_MODES / ABERRATION_EXITS). */
-#define MODE_METRIC 0
-#define MODE_RADIAL 1
-#define MODE_ADDITIVE 2
-#define EXIT_RESTORE 0
-#define EXIT_REPEAT 1
-#define EXIT_INVERT 2
 /* Faces per box: face id = 6 * row + 2 * axis + (1 on the +1/2 side, 0 on the -1/2 side). */
 #define BOX_FACES 6
 

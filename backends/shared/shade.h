@@ -39,7 +39,7 @@ FORCE_INLINE float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 pos
     float factor = 1.0f;
     if (cell > 0.0f) {
         bool odd = false;
-        if ((inst.meta.w & 1) != 0) {
+        if ((inst.meta.w & INSTANCE_FLAG_HAS_UVS) != 0) {
             TriangleUv t = TRIANGLE_UV(hit.triangle);
             real u = hit.bary.x * TO_REAL(t.uv01.x) + hit.bary.y * TO_REAL(t.uv01.z) + hit.bary.z * TO_REAL(t.uv2.x);
             real v = hit.bary.x * TO_REAL(t.uv01.y) + hit.bary.y * TO_REAL(t.uv01.w) + hit.bary.z * TO_REAL(t.uv2.y);

@@ -52,6 +52,7 @@ _ACCESSORS = {
     "portals": "PORTAL(i)",
     "triangle_blocks": "TRIANGLE_BLOCK(i)",
     "camera": "CAMERA_ROW",
+    "tlas_nodes": "TLAS_NODE(i)",
     "bvh4_nodes": "BVH_NODE(i)",
     "bvh_compact_nodes": "BVH_NODE(i)",
 }

@@ -592,7 +592,7 @@ def check_compact(records: np.ndarray, binary: Bvh) -> None:
     origin = records["child0"][0, :3].copy().view(np.float32)
     scale = records["child1"][0, :3].copy().view(np.float32)
     assert records["child1"][0, 3] == -1 and (scale >= np.finfo(np.float32).tiny).all()
-    for top in _decodings(np.full(3, compact_mod.GRID_MAX), origin, scale):
+    for top in _decodings(np.full(3, layout.BVH_GRID_MAX), origin, scale):
         assert (top >= nodes["bounds_max"][0]).all() and (origin <= nodes["bounds_min"][0]).all()
     inner = np.flatnonzero(nodes["count"] == 0)
     assert len(records) == 1 + len(inner)
@@ -661,7 +661,7 @@ def test_compact_frame_and_boxes_at_the_edges(lo, hi):
     box_lo = np.concatenate([pts.min(axis=1), [root_lo, root_hi, root_lo]])
     box_hi = np.concatenate([pts.max(axis=1), [root_hi, root_hi, root_lo]])
     qlo, qhi = compact_mod.compact_boxes(box_lo, box_hi, origin, scale)
-    assert ((qlo >= 0) & (qhi <= compact_mod.GRID_MAX) & (qlo <= qhi)).all()
+    assert ((qlo >= 0) & (qhi <= layout.BVH_GRID_MAX) & (qlo <= qhi)).all()
     for decoded in _decodings(qlo, origin, scale):
         assert (decoded <= box_lo).all()
     for decoded in _decodings(qhi, origin, scale):
