@@ -163,8 +163,8 @@ def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from backends.base import AOVS
-    from systems.app import render_once
     from engine.atomic_files import write_atomically
+    from systems.app import render_once
 
     if args.path:
         return cmd_render_path(args)
@@ -360,7 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SCENE",
-        help="scene names or groups (all, bench, demos, hard, overhead); default all (--quick: a few)",
+        help="scene names or groups (all, bench, demos, hard, overhead, space-count); default all (--quick: a few)",
     )
     bench.add_argument(
         "--backends", nargs="+", default=None, metavar="BACKEND", help="glsl, opencl, reference (default: glsl opencl)"

@@ -1,9 +1,10 @@
 """``aberrant bench``: every chosen backend and setting on every chosen scene, then the report, all at once.
 
 The run measures (cells, Embree, engine overhead), then renders
-``report.md``, ``results.json`` and ``speed_vs_error.png`` in memory and
-writes the three through temporary files and renames: an interrupted or
-failed run never leaves a half-written report beside an old plot.
+``report.md``, ``results.json`` and ``speed_vs_error.png`` (and
+``space_count.png`` when the run measured that sweep) in memory and writes
+them through temporary files and renames: an interrupted or failed run
+never leaves a half-written report beside an old plot.
 """
 
 from __future__ import annotations
@@ -18,21 +19,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
-from backends.base import BACKENDS, backend_class
-from engine.atomic_files import write_atomically
 from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
 from aberrant.bench.metrics import compare
 from aberrant.bench.overhead import measure_overhead
-from aberrant.bench.plot import plot_png
+from aberrant.bench.paired import SPACE_PLOT, has_space
+from aberrant.bench.plot import plot_png, space_plot_png
 from aberrant.bench.reference import ReferenceCache
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from aberrant.progress import Progress, clock
+from backends.base import BACKENDS, backend_class
+from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
-from aberrant.progress import Progress, clock
 from engine.scene import Scene
 
 FORMAT = "aberrant-bench"
@@ -132,7 +134,10 @@ def _plan(config: BenchConfig) -> list[Setting]:
 
 
 def _cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
-    """A fixed-size scene skips the size sweep: only its own size tests what it is for."""
+    """A fixed-size scene skips the size sweep (only its own size tests what it is for); a ``base_only`` one
+    every sweep (it is a point of its own)."""
+    if spec.base_only:
+        return [s for s in settings if s.sweep == ""]
     return [s for s in settings if not (spec.size and s.sweep == "size")]
 
 
@@ -311,15 +316,24 @@ def _clean(value: Any) -> Any:
 
 
 def write_outputs(results: dict[str, Any], out: Path) -> list[Path]:
-    """Render the report and the plot, then write all three files atomically."""
+    """Render the report and the plots, then write the files atomically.
+
+    ``space_count.png`` is written when the run measured the space-count sweep; otherwise an earlier run's is
+    removed, so the folder never holds a plot its report does not show.
+    """
     out.mkdir(parents=True, exist_ok=True)
     png, plot_note = plot_png(results)
     results["plot_note"] = plot_note
     text = render_report(results)
     data = json.dumps(_clean(results), indent=1, allow_nan=False).encode()
-    paths = [out / name for name in OUTPUTS]
-    write_atomically(dict(zip(paths, (text.encode(), data, png), strict=True)))
-    return paths
+    files = dict(zip([out / name for name in OUTPUTS], (text.encode(), data, png), strict=True))
+    space_plot = out / SPACE_PLOT
+    if has_space(results):
+        files[space_plot] = space_plot_png(results)
+    write_atomically(files)
+    if not has_space(results):
+        space_plot.unlink(missing_ok=True)
+    return list(files)
 
 
 def rerender(results_path: Path, out: Path) -> list[Path]:

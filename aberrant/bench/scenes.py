@@ -3,7 +3,7 @@
 One registry (:data:`BENCH_SCENES`) names every scene with how to build it,
 whether it has a fixed frame size (the watertightness views aim pixel
 centres at mesh vertices and edges, so only their own size tests anything),
-and its group (``bench``, ``demos``, ``hard``, ``overhead``). Builders take a
+and its group (``bench``, ``demos``, ``hard``, ``overhead``, ``space-count``). Builders take a
 folder for the mesh files they generate, so the files are made once and the
 scenes stay plain scene objects.
 """
@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from aberrant.bench.space import PLAIN, space_cases, thirty_boxes
 from components import Transform
 from engine.errors import AberrantError
 from engine.scene import Scene
@@ -209,6 +210,8 @@ class SceneSpec:
     description: str = ""
     #: The plain scene this one adds deformed space to: its frames alternate with this scene's (issue 10).
     baseline: Callable[[Path], Scene] | None = None
+    #: Only each backend's base setting: the scene is itself one point of a sweep (``space-count``).
+    base_only: bool = False
 
 
 def _demo_builder(name: str) -> Callable[[Path], Scene]:
@@ -270,6 +273,10 @@ def _specs() -> dict[str, SceneSpec]:
             baseline=ten_boxes,
         ),
     ]
+    specs.append(SceneSpec(PLAIN, thirty_boxes, "space-count", description="30 boxes and a floor", base_only=True))
+    for name, build, description in space_cases():
+        specs.append(SceneSpec(name, build, "space-count", description=description, baseline=thirty_boxes,
+                               base_only=True))  # fmt: skip
     return {spec.name: spec for spec in specs}
 
 
@@ -279,7 +286,7 @@ def bench_scenes() -> dict[str, SceneSpec]:
 
 
 #: Names that stand for several scenes on the command line.
-GROUPS: tuple[str, ...] = ("all", "bench", "demos", "hard", "overhead")
+GROUPS: tuple[str, ...] = ("all", "bench", "demos", "hard", "overhead", "space-count")
 
 #: What ``--quick`` measures: one of each kind, small.
 QUICK_SCENES: tuple[str, ...] = (
