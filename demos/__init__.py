@@ -28,6 +28,7 @@ DEMOS: dict[str, str] = {
     "bigger_inside": "demos.bigger_inside",
     "nested_aberrations": "demos.nested_aberrations",
     "portal_in_aberration": "demos.portal_in_aberration",
+    "hotel": "demos.hotel",
 }
 
 

@@ -106,6 +106,7 @@ SHOWCASE = (
     "bigger_inside",
     "nested_aberrations",
     "portal_in_aberration",
+    "hotel",
 )
 #: What must be seen through portals at the demo's camera: (at least this many events, mesh name prefixes).
 THROUGH_PORTALS: dict[str, list[tuple[int, tuple[str, ...]]]] = {
@@ -113,6 +114,7 @@ THROUGH_PORTALS: dict[str, list[tuple[int, tuple[str, ...]]]] = {
     "house": [(1, ("hall_",)), (2, ("gallery_",))],
     "endless_corridor": [(2, ("globe", "arch_", "floor", "runner", "west_", "east_"))],
     "portal_in_aberration": [(1, ("hall_",)), (2, ("garden_", "fountain_", "tree_", "hedge_"))],
+    "hotel": [(1, ("room",))],
 }
 #: Where the flythrough may end up off its last stop (the spline rounds corners; ticks are chords of it).
 WALK_TOLERANCE = 0.35
@@ -187,9 +189,9 @@ def test_deformations_change_the_picture(demo, frames, backend_factory):
 
 def _walk(demo: str, dt: float, ticks: int | None = None) -> tuple[object, list[str], np.ndarray]:
     """Walk the demo's camera path through the movement and teleport systems (no tracer); crossings and the end."""
+    from aberrant.flythrough import path_for
     from components import Transform
     from systems.app import App
-    from aberrant.flythrough import path_for
 
     scene = build_demo(demo)
     try:
@@ -233,8 +235,8 @@ def test_flythrough_walks_through_its_portals_and_ends_where_designed(demo_name)
 
 def test_a_few_flythrough_ticks_render(backend_factory):
     """Three ticks of a path through portals and an aberration, rendered by the reference backend."""
-    from systems.app import App
     from aberrant.flythrough import path_for
+    from systems.app import App
 
     scene = build_demo("portal_in_aberration")
     try:
