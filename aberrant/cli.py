@@ -360,7 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SCENE",
-        help="scene names or groups (all, bench, demos, hard, overhead, space-count); default all (--quick: a few)",
+        help="scene names or groups (all, bench, demos, hard, overhead, architecture, hotel, space-count); "
+        "default all (--quick: a few)",
     )
     bench.add_argument(
         "--backends", nargs="+", default=None, metavar="BACKEND", help="glsl, opencl, reference (default: glsl opencl)"

@@ -291,6 +291,22 @@ def stops() -> list[Stop]:
     ]
 
 
+def views() -> dict[str, tuple[Vec3, Vec3]]:
+    """Named views of the level (eye, point looked at): its own camera, down the corridor, in the suite before
+    the closet (the ballroom through its door), and in a room looking back out at the corridor."""
+    closet_lo, closet_hi = closet_box()
+    closet_z = 0.5 * (closet_lo[2] + closet_hi[2])
+    suite_y = closet_lo[1] + EYE
+    (lo, hi), offset = room_box(7)
+    room_y, door_z = lo[1] + EYE, 0.5 * (lo[2] + hi[2]) + offset
+    return {
+        "start": (START, START_LOOK),
+        "corridor": ((0.6, EYE, -20.0), (-1.0, EYE - 0.3, -45.0)),
+        "suite": ((closet_lo[0] - 3.5, suite_y, closet_z + 1.2), (closet_lo[0], suite_y - 0.4, closet_z)),
+        "room": ((hi[0] - 1.0, room_y, door_z - 1.0), (lo[0], room_y - 0.2, door_z)),
+    }
+
+
 def camera_path() -> CameraPath:
     """The walk of :func:`stops`, converted for the real systems (portals)."""
     return with_scene(build, stops())

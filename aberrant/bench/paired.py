@@ -73,3 +73,27 @@ def space_table(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
                 ms = f"{base['frame']['median_ms']:.1f}" if base else "–"
                 lines.append([kind, WHERE[placement], family, ms, *cells, goal, status])
     return header, lines
+
+
+#: The hotel's goal per view: its frame over the same level with every portal shut.
+HOTEL_GOAL = 1.3
+HOTEL_PREFIX = "hotel-view-"
+
+
+def hotel_table(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """A line per hotel view and backend: frame times of both, the paired ratio, the goal and whether it is met."""
+    header = ["view", "backend", "hotel ms", "doors shut ms", "paired ratio", "goal", "status"]
+    lines = []
+    for row in results["rows"]:
+        if not row["scene"].startswith(HOTEL_PREFIX) or row["setting"]["sweep"] != "":
+            continue
+        view = row["scene"][len(HOTEL_PREFIX) :]
+        ratio = paired_ratio(row)
+        if ratio is None:
+            lines.append([view, row["family"], "–", "–", row["status"], f"<= {HOTEL_GOAL}x", "not measured"])
+            continue
+        paired = row["baseline_paired"]
+        met = "**met**" if ratio <= HOTEL_GOAL else "**not met**"
+        lines.append([view, row["family"], f"{paired['frame_ms']:.1f}", f"{paired['other_ms']:.1f}", f"{ratio:.2f}x",
+                      f"<= {HOTEL_GOAL}x", met])  # fmt: skip
+    return header, lines

@@ -13,7 +13,7 @@ from collections import defaultdict
 from typing import Any
 
 from aberrant.bench.embree import MODES
-from aberrant.bench.paired import SPACE_GOAL, SPACE_PLOT, has_space, space_table
+from aberrant.bench.paired import HOTEL_GOAL, SPACE_GOAL, SPACE_PLOT, has_space, hotel_table, space_table
 from aberrant.bench.sweeps import SWEEPS
 from engine.errors import AberrantError
 
@@ -215,6 +215,22 @@ def _space(results: dict[str, Any]) -> list[str]:
     ]
 
 
+def _hotel(results: dict[str, Any]) -> list[str]:
+    header, rows = hotel_table(results)
+    if not rows:
+        return []
+    return [
+        "## The hotel against its doors shut",
+        "",
+        "The `hotel` demo (104 portals) from each of its views, against the same level with every portal "
+        "replaced by a quad of its shape (the doors shut: the same geometry, Euclidean), frames alternated: "
+        f"the median of the per-pair ratios. Goal: at most {HOTEL_GOAL}x per view.",
+        "",
+        *_table(header, rows),
+        "",
+    ]
+
+
 def _embree(results: dict[str, Any]) -> list[str]:
     rows = []
     for scene, anchor in results["embree"].items():
@@ -384,6 +400,13 @@ def render_report(results: dict[str, Any]) -> str:
     ]
     lines += _targets(results) + _headline(results)
     lines += ["## Speed against error", "", "![frame time against error](speed_vs_error.png)", ""]
-    lines += [results.get("plot_note", ""), "", *_space(results), *_overhead(results), *_embree(results)]
+    lines += [
+        results.get("plot_note", ""),
+        "",
+        *_space(results),
+        *_hotel(results),
+        *_overhead(results),
+        *_embree(results),
+    ]
     lines += _detail(results) + _problems(results) + _swept(results)
     return "\n".join(lines).rstrip() + "\n"
