@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -59,6 +61,8 @@ class BenchConfig:
     overhead: bool = True
     embree: bool = True
     command: str = ""
+    #: Worker processes that render the missing reference frames before anything is timed (1: none, lazily).
+    jobs: int = 1
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -69,6 +73,7 @@ class BenchConfig:
             "quick": self.quick,
             "sweeps": self.sweeps,
             "command": self.command,
+            "jobs": self.jobs,
         }
 
 
@@ -88,6 +93,7 @@ def make_config(
     sweeps: list[str] | None = None,
     overhead: bool = True,
     command: str = "",
+    jobs: int = 1,
 ) -> BenchConfig:
     """Check every argument before anything runs; a bad one is an :class:`AberrantError` naming the choices."""
     specs = resolve_scenes(_names(scenes), quick)
@@ -98,6 +104,8 @@ def make_config(
     repeat = (QUICK_REPEAT if quick else FULL_REPEAT) if repeat is None else repeat
     if not 1 <= repeat <= 1000:
         raise AberrantError(f"--repeat must lie in [1, 1000], got {repeat}")
+    if not 1 <= jobs <= 256:
+        raise AberrantError(f"--jobs must lie in [1, 256], got {jobs}")
     sweep_names = check_sweeps(_names(sweeps)) if sweeps else list(QUICK_SWEEPS if quick else check_sweeps(["all"]))
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
@@ -113,6 +121,7 @@ def make_config(
         overhead,
         True,
         command,
+        jobs,
     )
 
 
@@ -139,6 +148,45 @@ def _cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
     if spec.base_only:
         return [s for s in settings if s.sweep == ""]
     return [s for s in settings if not (spec.size and s.sweep == "size")]
+
+
+def _reference_keys(
+    spec: SceneSpec, config: BenchConfig, settings: list[Setting]
+) -> list[tuple[int | None, tuple[int, int]]]:
+    """The (max_events, size) of every reference frame the scene's cells compare with."""
+    cells = _cells(spec, settings)
+    return sorted({(s.max_events, spec.size or s.size_for(config.size)) for s in cells}, key=str)
+
+
+def _render_references(task: tuple[str, list[tuple[int | None, tuple[int, int]]]]) -> str:
+    """A worker's share: one scene's missing reference frames into the disk cache (errors are the run's to tell)."""
+    from aberrant.bench.reference import ReferenceCache
+    from aberrant.bench.scenes import bench_scenes
+
+    name, keys = task
+    try:
+        scene = bench_scenes()[name].build(asset_dir())
+    except Exception:  # the measuring run records why the scene does not build
+        return name
+    try:
+        camera, cache, own = scene_camera(scene), ReferenceCache(), scene.settings
+        for max_events, size in keys:
+            scene.settings = own if max_events is None else replace(own, max_events=max_events)
+            cache.get(scene, camera, size)
+    finally:
+        scene.close()
+    return name
+
+
+def render_references(config: BenchConfig, settings: list[Setting], progress: Progress) -> None:
+    """Every reference frame the run will compare with, rendered in ``config.jobs`` processes, so the
+    measuring that follows finds them in the disk cache (the float64 tracer is the slow part of a run)."""
+    tasks = [(spec.name, _reference_keys(spec, config, settings)) for spec in config.scenes]
+    progress.note(f"reference frames: {len(config.scenes)} scenes in {config.jobs} processes")
+    context = multiprocessing.get_context("spawn")  # the GL and OpenCL runtimes do not survive a fork
+    with ProcessPoolExecutor(config.jobs, mp_context=context) as pool:
+        for name in pool.map(_render_references, tasks):
+            progress.show(f"reference frames: {name}")
 
 
 def _embree_rows(
@@ -249,6 +297,8 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
     anchor = embree.EmbreeAnchor(config.repeat) if embree_reason is None else None
     total = sum(len(_cells(spec, settings)) for spec in config.scenes)
     progress = Progress(total, stream)
+    if config.jobs > 1:
+        render_references(config, settings, progress)
     progress.note(f"aberrant bench: {len(config.scenes)} scenes x {len(settings)} settings = {total} cells")
     rows: list[dict[str, Any]] = []
     scenes: dict[str, Any] = {}
