@@ -294,7 +294,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     config = make_config(
         scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
         repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
-        command=" ".join([PROG, *(args.argv or [])]), jobs=args.jobs,
+        command=" ".join([PROG, *(args.argv or [])]), jobs=args.jobs, time_limit_s=args.time_limit,
     )  # fmt: skip
     return bench_command(config)
 
@@ -380,6 +380,13 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
     bench.add_argument(
         "--jobs", type=int, default=1, help="render the missing reference frames first, in this many processes"
+    )
+    bench.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="skip the scenes not begun after this long (their rows say so) and still write the report",
     )
     bench.add_argument(
         "--from-results",

@@ -136,7 +136,7 @@ def _headline(results: dict[str, Any]) -> list[str]:
             if row is None:
                 cells.append("–")
             elif row["status"] != "ok":
-                cells.append("unsupported" if row["status"].startswith("unsupported") else "error")
+                cells.append(row["status"].split(":")[0])  # unsupported, error or skipped
             else:
                 ratio = f" ({_ratio(best_ratio(row))})" if row.get("embree_ratio") is not None else ""
                 cells.append(f"{_num(row['mrays_per_s'])}{ratio}")

@@ -63,6 +63,9 @@ class BenchConfig:
     command: str = ""
     #: Worker processes that render the missing reference frames before anything is timed (1: none, lazily).
     jobs: int = 1
+    #: Seconds after which the scenes not yet begun are skipped (their rows say so), so a run on borrowed
+    #: time still writes its report; ``None``: no limit.
+    time_limit_s: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -74,6 +77,7 @@ class BenchConfig:
             "sweeps": self.sweeps,
             "command": self.command,
             "jobs": self.jobs,
+            "time_limit_s": self.time_limit_s,
         }
 
 
@@ -94,6 +98,7 @@ def make_config(
     overhead: bool = True,
     command: str = "",
     jobs: int = 1,
+    time_limit_s: float | None = None,
 ) -> BenchConfig:
     """Check every argument before anything runs; a bad one is an :class:`AberrantError` naming the choices."""
     specs = resolve_scenes(_names(scenes), quick)
@@ -106,6 +111,8 @@ def make_config(
         raise AberrantError(f"--repeat must lie in [1, 1000], got {repeat}")
     if not 1 <= jobs <= 256:
         raise AberrantError(f"--jobs must lie in [1, 256], got {jobs}")
+    if time_limit_s is not None and not time_limit_s > 0:
+        raise AberrantError(f"--time-limit must be positive, got {time_limit_s:g}")
     sweep_names = check_sweeps(_names(sweeps)) if sweeps else list(QUICK_SWEEPS if quick else check_sweeps(["all"]))
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
@@ -122,6 +129,7 @@ def make_config(
         True,
         command,
         jobs,
+        time_limit_s,
     )
 
 
@@ -227,6 +235,20 @@ def _pair(
     return anchor.tracer(size, entry["best"]) if entry.get("status") == "ok" else None
 
 
+def _unmeasured(
+    spec: SceneSpec, config: BenchConfig, todo: list[Setting], why: str, progress: Progress
+) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
+    """The scene's facts, anchor and rows when its cells cannot be measured: each row says ``why``."""
+    info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
+            "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
+            "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
+    rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
+             "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
+             "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
+    progress.step(spec.name, len(todo))
+    return info, {"status": why}, rows
+
+
 def _measure_scene(
     spec: SceneSpec,
     config: BenchConfig,
@@ -247,14 +269,7 @@ def _measure_scene(
         if scene is not None:
             scene.close()
         why = f"error: the scene failed to build: {type(e).__name__}: {' '.join(str(e).split())}"
-        info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
-                "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
-                "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
-        rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
-                 "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
-                 "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
-        progress.step(spec.name, len(todo))
-        return info, {"status": why}, rows
+        return _unmeasured(spec, config, todo, why, progress)
     rows = []
     baseline = None
     try:
@@ -305,9 +320,13 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
     anchors: dict[str, Any] = {}
     try:
         for spec in config.scenes:
-            info, scene_anchor, scene_rows = _measure_scene(
-                spec, config, settings, cells, anchor, embree_reason, progress
-            )
+            if config.time_limit_s is not None and time.time() - started > config.time_limit_s:
+                why = f"skipped: the run's time limit ({config.time_limit_s:g} s) was reached"
+                info, scene_anchor, scene_rows = _unmeasured(spec, config, _cells(spec, settings), why, progress)
+            else:
+                info, scene_anchor, scene_rows = _measure_scene(
+                    spec, config, settings, cells, anchor, embree_reason, progress
+                )
             scenes[spec.name], anchors[spec.name] = info, scene_anchor
             rows += scene_rows
         overhead = []
