@@ -327,7 +327,8 @@ def space_plot_png(results: dict[str, Any]) -> bytes:
                     label=f"{family}, {WHERE[placement]}")  # fmt: skip
         ax.axhline(1.0, color="black", lw=0.8)
         ax.axhline(SPACE_GOAL, color="#2ca02c", ls=":", lw=1.2)
-        ax.text(min(COUNTS), SPACE_GOAL, f" goal out of view: {SPACE_GOAL}x", fontsize=8, color="#2ca02c", va="bottom")
+        ax.text(max(COUNTS), SPACE_GOAL, f"goal out of view: {SPACE_GOAL}x ", fontsize=8, color="#2ca02c", va="top",
+                ha="right")  # fmt: skip
         ax.set_xscale("log", base=2)
         ax.set_yscale("log")
         ax.set_ylim(low, top)
