@@ -21,7 +21,8 @@
 # (default 420, so that with the machine's start the whole stays under 9 minutes): the scenes it has not
 # begun by then are skipped (--time-limit; the report lists them), and it still writes its report.
 #
-# Environment: PYTHON (default: .venv/bin/python if present, else python3), BUDGET_S, REPEAT (timed frames
+# Environment: GL_DIR and WHEEL_DIR (the staged .debs and wheels: .gl, .whl),
+# PYTHON (default: .venv/bin/python if present, else python3), BUDGET_S, REPEAT (timed frames
 # per cell, default 5), SWEEPS (default none: base settings, f32; "precision" adds f64), SIZES (default
 # "800x800 1920x1080"), SCENES_800 / SCENES_1080 (override the scene lists).
 set -euo pipefail
@@ -29,6 +30,8 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 
+GL_DIR="${GL_DIR:-.gl}"
+WHEEL_DIR="${WHEEL_DIR:-.whl}"
 GL_DEBS=(libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
 # The bench's imports beyond what the machine's Python brings (numpy, pillow, matplotlib), with pyproject's bounds.
 WHEELS=("esper>=3.8,<4" "trimesh>=4,<6" "moderngl>=5.10,<6" "glcontext>=3,<4" "pyopencl>=2024.1" pytools
@@ -60,18 +63,18 @@ prepare() {
   command -v apt-get >/dev/null || die "prepare needs apt-get (Debian or Ubuntu) to download ${GL_DEBS[*]}"
   local py="${PYTHON:-python3}"
   "$py" -m pip --version >/dev/null 2>&1 || die "prepare needs pip ($py -m pip)"
-  mkdir -p .gl .whl /tmp/amd64/partial
+  mkdir -p "$GL_DIR" "$WHEEL_DIR" /tmp/amd64/partial
   local apt=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64)
-  say "downloading ${GL_DEBS[*]} into .gl/"
+  say "downloading ${GL_DEBS[*]} into $GL_DIR/"
   apt-get "${apt[@]}" -q update >/dev/null
-  (cd .gl && apt-get "${apt[@]}" -q download "${GL_DEBS[@]}")
-  say "downloading wheels for CPython 3.12 into .whl/"
-  rm -f .whl/*.whl
+  (cd "$GL_DIR" && apt-get "${apt[@]}" -q download "${GL_DEBS[@]}")
+  say "downloading wheels for CPython 3.12 into $WHEEL_DIR/"
+  rm -f "$WHEEL_DIR"/*.whl
   "$py" -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
     --platform manylinux_2_28_x86_64 --platform manylinux_2_27_x86_64 --platform manylinux_2_17_x86_64 \
     --platform manylinux2014_x86_64 --platform manylinux1_x86_64 --platform manylinux_2_5_x86_64 \
-    -d .whl "${WHEELS[@]}"
-  du -sh .gl .whl
+    -d "$WHEEL_DIR" "${WHEELS[@]}"
+  du -sh "$GL_DIR" "$WHEEL_DIR"
   say "done; on the NVIDIA machine carry .gl and .whl and run: scripts/bench_gpu.sh run \"\$OUT\""
 }
 
@@ -101,11 +104,11 @@ setup_loaders() {
     [ -d "$dir" ] && export LD_LIBRARY_PATH="$dir${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
   done
   if ! find_lib libEGL.so.1 >/dev/null || ! find_lib libGL.so.1 >/dev/null; then
-    compgen -G ".gl/*.deb" >/dev/null ||
-      die "no libEGL.so.1/libGL.so.1 and no .gl/*.deb to bring them: run 'scripts/bench_gpu.sh prepare' where apt works, and carry .gl"
-    say "unpacking the GL loaders from .gl/"
+    compgen -G "$GL_DIR/*.deb" >/dev/null ||
+      die "no libEGL.so.1/libGL.so.1 and no $GL_DIR/*.deb to bring them: run 'scripts/bench_gpu.sh prepare' where apt works, and carry $GL_DIR"
+    say "unpacking the GL loaders from $GL_DIR/"
     local deb
-    for deb in .gl/*.deb; do dpkg -x "$deb" /; done
+    for deb in "$GL_DIR"/*.deb; do dpkg -x "$deb" /; done
     ldconfig
   fi
   find_lib libEGL_nvidia.so.0 >/dev/null || die "no libEGL_nvidia.so.0: the driver's graphics libraries are not mounted"
@@ -139,18 +142,18 @@ print(" ".join(m for m in sys.argv[1:] if importlib.util.find_spec(m) is None))
 EOF
 )"
   if [ -n "$missing" ]; then
-    compgen -G ".whl/*.whl" >/dev/null ||
-      die "missing Python modules ($missing) and no .whl/ to install them from: run 'scripts/bench_gpu.sh prepare' and carry .whl"
-    say "installing .whl/ into /tmp/bench_gpu_site (missing: $missing)"
+    compgen -G "$WHEEL_DIR/*.whl" >/dev/null ||
+      die "missing Python modules ($missing) and no $WHEEL_DIR/ to install them from: run 'scripts/bench_gpu.sh prepare' and carry $WHEEL_DIR"
+    say "installing $WHEEL_DIR/ into /tmp/bench_gpu_site (missing: $missing)"
     "$PYTHON" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-      --target /tmp/bench_gpu_site .whl/*.whl
+      --target /tmp/bench_gpu_site "$WHEEL_DIR"/*.whl
     export PYTHONPATH="/tmp/bench_gpu_site${PYTHONPATH:+:$PYTHONPATH}"
     missing="$("$PYTHON" - "${MODULES[@]}" <<'EOF'
 import importlib.util, sys
 print(" ".join(m for m in sys.argv[1:] if importlib.util.find_spec(m) is None))
 EOF
 )"
-    [ -z "$missing" ] || die "still missing after installing .whl/: $missing"
+    [ -z "$missing" ] || die "still missing after installing $WHEEL_DIR/: $missing"
   fi
 }
 

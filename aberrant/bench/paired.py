@@ -1,4 +1,5 @@
-"""What the cells timed against a plain twin measured: the ``space-count`` sweep's lines and goals.
+"""What the cells timed against a plain twin measured: the ``space-count`` sweep and the hotel's views, their
+lines, goals and report sections.
 
 Every such cell holds ``baseline_paired``: its frames alternated with the
 plain scene's on a second backend of the same setting, ``inverse`` being
@@ -10,6 +11,7 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
+from aberrant.bench.markdown import markdown_table
 from aberrant.bench.space import COUNTS, KINDS, PLACEMENTS, PLAIN, parse_space_name
 
 #: Out of view, 1,024 portals or boxes cost at most this much over the plain frame; in view, the ratio at
@@ -97,3 +99,42 @@ def hotel_table(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
         lines.append([view, row["family"], f"{paired['frame_ms']:.1f}", f"{paired['other_ms']:.1f}", f"{ratio:.2f}x",
                       f"<= {HOTEL_GOAL}x", met])  # fmt: skip
     return header, lines
+
+
+def space_section(results: dict[str, Any]) -> list[str]:
+    """The report's space-count section: what was measured, the table and the plot (none without the sweep)."""
+    if not has_space(results):
+        return []
+    header, rows = space_table(results)
+    return [
+        "## Space count: frame time against the number of portals and boxes",
+        "",
+        "A floor and 30 boxes in view, plus N portals (N / 2 linked pairs) or N metric aberration boxes, placed "
+        "behind the camera (*out of view*: no ray reaches them) or on a grid across the view that covers a "
+        "quarter of it whatever N is (*in view*: a ray passes at most one). Each figure is the frame time over "
+        "the same frame without them (N = 0; its time in the fourth column), the two scenes' frames alternated "
+        "so both see the same load: the median of the per-pair ratios. Goals: out of view, 1,024 of them cost "
+        f"at most {SPACE_GOAL}x; in view, the ratio at 1,024 is at most {SPACE_GOAL} times the ratio at 4.",
+        "",
+        *markdown_table(header, rows),
+        "",
+        f"![paired frame-time ratio against N]({SPACE_PLOT})",
+        "",
+    ]
+
+
+def hotel_section(results: dict[str, Any]) -> list[str]:
+    """The report's hotel section: each view against its doors shut (none when no view was measured)."""
+    header, rows = hotel_table(results)
+    if not rows:
+        return []
+    return [
+        "## The hotel against its doors shut",
+        "",
+        "The `hotel` demo (104 portals) from each of its views, against the same level with every portal "
+        "replaced by a quad of its shape (the doors shut: the same geometry, Euclidean), frames alternated: "
+        f"the median of the per-pair ratios. Goal: at most {HOTEL_GOAL}x per view.",
+        "",
+        *markdown_table(header, rows),
+        "",
+    ]

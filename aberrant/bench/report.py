@@ -13,7 +13,8 @@ from collections import defaultdict
 from typing import Any
 
 from aberrant.bench.embree import MODES
-from aberrant.bench.paired import HOTEL_GOAL, SPACE_GOAL, SPACE_PLOT, has_space, hotel_table, space_table
+from aberrant.bench.markdown import markdown_table
+from aberrant.bench.paired import hotel_section, space_section
 from aberrant.bench.sweeps import SWEEPS
 from engine.errors import AberrantError
 
@@ -49,12 +50,6 @@ def _pct(fraction: float | None) -> str:
 
 def _ratio(value: float | None) -> str:
     return "–" if value is None else f"{value:.2f}x"
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(cell.replace("|", "/") for cell in row) + " |" for row in rows]
-    return out
 
 
 def base_rows(results: dict[str, Any]) -> dict[tuple[str, str], dict[str, Any]]:
@@ -122,7 +117,7 @@ def _targets(results: dict[str, Any]) -> list[str]:
                 _mark(ok),
             ]
         )
-    return ["## Issue 10 targets", "", *_table(["target", "measured", "goal", "status"], rows), ""]
+    return ["## Issue 10 targets", "", *markdown_table(["target", "measured", "goal", "status"], rows), ""]
 
 
 def _headline(results: dict[str, Any]) -> list[str]:
@@ -151,7 +146,7 @@ def _headline(results: dict[str, Any]) -> list[str]:
         "Ratios are *paired*: Embree's trace of the same rays alternates with the backend's frames, so both see "
         "the same background load; the median of the per-pair ratios.",
         "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
         "",
     ]
 
@@ -189,44 +184,7 @@ def _overhead(results: dict[str, Any]) -> list[str]:
         "after 5 warm-up ticks; the backend's render is replaced by a no-op, everything else is the real "
         "App (the render system's own work included).",
         "",
-        *_table(header, rows),
-        "",
-    ]
-
-
-def _space(results: dict[str, Any]) -> list[str]:
-    if not has_space(results):
-        return []
-    header, rows = space_table(results)
-    return [
-        "## Space count: frame time against the number of portals and boxes",
-        "",
-        "A floor and 30 boxes in view, plus N portals (N / 2 linked pairs) or N metric aberration boxes, placed "
-        "behind the camera (*out of view*: no ray reaches them) or on a grid across the view that covers a "
-        "quarter of it whatever N is (*in view*: a ray passes at most one). Each figure is the frame time over "
-        "the same frame without them (N = 0; its time in the fourth column), the two scenes' frames alternated "
-        "so both see the same load: the median of the per-pair ratios. Goals: out of view, 1,024 of them cost "
-        f"at most {SPACE_GOAL}x; in view, the ratio at 1,024 is at most {SPACE_GOAL} times the ratio at 4.",
-        "",
-        *_table(header, rows),
-        "",
-        f"![paired frame-time ratio against N]({SPACE_PLOT})",
-        "",
-    ]
-
-
-def _hotel(results: dict[str, Any]) -> list[str]:
-    header, rows = hotel_table(results)
-    if not rows:
-        return []
-    return [
-        "## The hotel against its doors shut",
-        "",
-        "The `hotel` demo (104 portals) from each of its views, against the same level with every portal "
-        "replaced by a quad of its shape (the doors shut: the same geometry, Euclidean), frames alternated: "
-        f"the median of the per-pair ratios. Goal: at most {HOTEL_GOAL}x per view.",
-        "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
         "",
     ]
 
@@ -264,7 +222,7 @@ def _embree(results: dict[str, Any]) -> list[str]:
             "mismatch vs reference",
             "depth p99 vs reference",
         ]
-        out += [*_table(header, rows), ""]
+        out += [*markdown_table(header, rows), ""]
     out += [f"- {n}" for n in notes] + ([""] if notes else [])
     return out
 
@@ -321,7 +279,7 @@ def _detail(results: dict[str, Any]) -> list[str]:
                     str(e["nan_count"]),
                 ]
             )
-        out += [*_table(header, table), ""]
+        out += [*markdown_table(header, table), ""]
     return out
 
 
@@ -336,7 +294,7 @@ def _problems(results: dict[str, Any]) -> list[str]:
         [scene, backend, f"{len(labels)} ({', '.join(labels[:3])}{', …' if len(labels) > 3 else ''})", status]
         for (scene, backend, status), labels in groups.items()
     ]
-    return ["## Cells that did not run", "", *_table(["scene", "backend", "settings", "status"], rows), ""]
+    return ["## Cells that did not run", "", *markdown_table(["scene", "backend", "settings", "status"], rows), ""]
 
 
 def _swept(results: dict[str, Any]) -> list[str]:
@@ -403,8 +361,8 @@ def render_report(results: dict[str, Any]) -> str:
     lines += [
         results.get("plot_note", ""),
         "",
-        *_space(results),
-        *_hotel(results),
+        *space_section(results),
+        *hotel_section(results),
         *_overhead(results),
         *_embree(results),
     ]

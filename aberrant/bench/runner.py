@@ -11,13 +11,11 @@ from __future__ import annotations
 
 import json
 import math
-import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -28,7 +26,7 @@ from aberrant.bench.metrics import compare
 from aberrant.bench.overhead import measure_overhead
 from aberrant.bench.paired import SPACE_PLOT, has_space
 from aberrant.bench.plot import plot_png, space_plot_png
-from aberrant.bench.reference import ReferenceCache
+from aberrant.bench.reference import ReferenceCache, render_ahead
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
@@ -166,35 +164,12 @@ def _reference_keys(
     return sorted({(s.max_events, spec.size or s.size_for(config.size)) for s in cells}, key=str)
 
 
-def _render_references(task: tuple[str, list[tuple[int | None, tuple[int, int]]]]) -> str:
-    """A worker's share: one scene's missing reference frames into the disk cache (errors are the run's to tell)."""
-    from aberrant.bench.reference import ReferenceCache
-    from aberrant.bench.scenes import bench_scenes
-
-    name, keys = task
-    try:
-        scene = bench_scenes()[name].build(asset_dir())
-    except Exception:  # the measuring run records why the scene does not build
-        return name
-    try:
-        camera, cache, own = scene_camera(scene), ReferenceCache(), scene.settings
-        for max_events, size in keys:
-            scene.settings = own if max_events is None else replace(own, max_events=max_events)
-            cache.get(scene, camera, size)
-    finally:
-        scene.close()
-    return name
-
-
 def render_references(config: BenchConfig, settings: list[Setting], progress: Progress) -> None:
     """Every reference frame the run will compare with, rendered in ``config.jobs`` processes, so the
     measuring that follows finds them in the disk cache (the float64 tracer is the slow part of a run)."""
     tasks = [(spec.name, _reference_keys(spec, config, settings)) for spec in config.scenes]
     progress.note(f"reference frames: {len(config.scenes)} scenes in {config.jobs} processes")
-    context = multiprocessing.get_context("spawn")  # the GL and OpenCL runtimes do not survive a fork
-    with ProcessPoolExecutor(config.jobs, mp_context=context) as pool:
-        for name in pool.map(_render_references, tasks):
-            progress.show(f"reference frames: {name}")
+    render_ahead(tasks, asset_dir(), config.jobs, lambda name: progress.show(f"reference frames: {name}"))
 
 
 def _embree_rows(

@@ -45,7 +45,9 @@ def test_usage_and_a_machine_without_nvidia_smi_fail_clearly(tmp_path):
 def test_missing_python_modules_name_what_to_bring(tmp_path):
     (tmp_path / "python").write_text('#!/bin/sh\nexec python3 -S "$@"\n')  # a Python with no site packages
     (tmp_path / "python").chmod(0o755)
-    result = _bash(f"cd '{tmp_path}' && source '{SCRIPT}' && PYTHON='{tmp_path / 'python'}' setup_python")
+    (tmp_path / "wheels").mkdir()  # nothing staged
+    env = {"PYTHON": str(tmp_path / "python"), "WHEEL_DIR": str(tmp_path / "wheels")}
+    result = _bash(f"source '{SCRIPT}' && setup_python", env=env)
     assert result.returncode == 2
     assert "missing Python modules (esper trimesh" in result.stderr and "bench_gpu.sh prepare" in result.stderr
 
