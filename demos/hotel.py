@@ -1,8 +1,8 @@
 """A hotel corridor of 50 doors, each onto a different room far bigger than the corridor has room for.
 
 The corridor is 4 units wide and 64 long; 25 doors a side, 2.4 units apart,
-each filled by a portal whose partner is the door of a room 7 to 15 units
-wide lying far under the corridor, where no ray from it reaches: 50 rooms
+each filled by a portal whose partner is the door of a room 7 to 14 units
+wide and 8 to 18 deep, far under the corridor where no ray from it reaches: 50 rooms
 that could not fit behind those doors, side by side, each its own colours
 and furniture (bedrooms, libraries, a pool, a garden, a dining room...).
 One of them, the suite, holds a room inside the room: a closet in its middle
