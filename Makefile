@@ -37,17 +37,19 @@ INSTALLED := $(VENV)/.stamp-installed
 
 # Extra arguments for pytest, e.g. `make test PYTEST_ARGS="-k portal -x"`.
 PYTEST_ARGS ?=
+BENCH_GPU_OUT ?= docs/bench/gpu
 DEMO := aberration_tunnels
 DEMO_OUT := out/$(DEMO).png
 DEMO_CLIP := out/$(DEMO).gif
 
-.PHONY: help setup apt-packages demo gallery docs test bench bench-pytest lint format clean
+.PHONY: help setup apt-packages demo gallery docs test bench bench-gpu bench-pytest lint format clean
 
 help:
 	@echo "aberrant — make targets:"
 	echo "  make demo    install what is missing, render $(DEMO) to $(DEMO_OUT) and $(DEMO_CLIP)"
 	echo "  make test    install what is missing, run the test suite (pytest -q)"
 	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
+	echo "  make bench-gpu  the bench on an NVIDIA machine: scripts/bench_gpu.sh run $(BENCH_GPU_OUT)"
 	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
 	echo "  make gallery render every demo into docs/gallery/ (the README's gallery)"
 	echo "  make docs    the API reference from the docstrings (pdoc) into out/api/; fails on broken references"
@@ -152,6 +154,12 @@ test: | apt-packages $(INSTALLED)
 # Speed against error: every backend and setting on every scene -> out/bench/{report.md,results.json,speed_vs_error.png}.
 bench: | apt-packages $(INSTALLED)
 	@"$(VENV)/bin/aberrant" bench --out out/bench $(BENCH_ARGS)
+
+# The bench on an NVIDIA machine: GLSL through EGL on the NVIDIA driver, OpenCL through its ICD, 800x800 and
+# 1920x1080 -> $(BENCH_GPU_OUT)/<size>/. No set-up prerequisites: such a machine brings its own Python, and
+# `scripts/bench_gpu.sh prepare` (run where packages can be fetched) stages the loaders and wheels it lacks.
+bench-gpu:
+	@scripts/bench_gpu.sh run "$(BENCH_GPU_OUT)"
 
 # The pytest-benchmark micro-benchmarks (tests/bench_*.py).
 # --benchmark-only overrides the --benchmark-skip in pyproject's addopts;

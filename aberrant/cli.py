@@ -304,7 +304,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     config = make_config(
         scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
         repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
-        command=" ".join([PROG, *(args.argv or [])]),
+        command=" ".join([PROG, *(args.argv or [])]), jobs=args.jobs, time_limit_s=args.time_limit,
     )  # fmt: skip
     return bench_command(config)
 
@@ -384,7 +384,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SCENE",
-        help="scene names or groups (all, bench, demos, hard, overhead), scene files or level.py[:func]; "
+        help="scene names or groups (all, bench, demos, hard, overhead, architecture, hotel, space-count), "
+        "scene files or level.py[:func]; "
         "default all (--quick: a few)",
     )
     bench.add_argument(
@@ -402,6 +403,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="all, none, or: precision max_events size leaf workgroup tables local_size",
     )
     bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
+    bench.add_argument(
+        "--jobs", type=int, default=1, help="render the missing reference frames first, in this many processes"
+    )
+    bench.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="skip the scenes not begun after this long (their rows say so) and still write the report",
+    )
     bench.add_argument(
         "--from-results",
         default=None,

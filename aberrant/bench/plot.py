@@ -1,4 +1,5 @@
-"""``speed_vs_error.png``: frame time (log) against error, one marker per backend, a line per sweep, the Pareto front.
+"""``speed_vs_error.png``: frame time (log) against error, one marker per backend, a line per sweep, the Pareto front;
+and ``space_count.png``: the space-count sweep's paired ratios against N.
 
 Each point is one setting summarised over the scenes that every compared
 setting traced (geometric mean of frame times, so no one big scene
@@ -18,6 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from aberrant.bench.metrics import DEPTH_P99_MAX, MISMATCH_MAX_EUCLIDEAN, geometric_mean, pareto_front
+from aberrant.bench.paired import SPACE_GOAL, WHERE, space_series
+from aberrant.bench.space import COUNTS, KINDS
 
 MARKERS: dict[str, str] = {"glsl": "o", "opencl": "s", "reference": "D", "embree": "*"}
 SWEEP_COLORS: dict[str, str] = {
@@ -277,7 +280,7 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
     return buffer.getvalue()
 
 
-def _notice_png(text: str) -> bytes:
+def notice_png(text: str) -> bytes:
     from PIL import Image, ImageDraw
 
     image = Image.new("RGB", (900, 120), "white")
@@ -293,5 +296,58 @@ def plot_png(results: dict[str, Any]) -> tuple[bytes, str]:
         import matplotlib  # noqa: F401
     except ImportError:
         text = "plot: matplotlib is not installed (pip install '.[bench]'); see the tables instead"
-        return _notice_png(text), text
+        return notice_png(text), text
     return _matplotlib_png(results), note(results)
+
+
+def space_plot_png(results: dict[str, Any]) -> bytes:
+    """``space_count.png``: paired ratio to N = 0 against N (both log), a panel per kind, a line per backend and
+    placement (a notice without matplotlib)."""
+    try:
+        import matplotlib
+    except ImportError:
+        return notice_png("plot: matplotlib is not installed (pip install '.[bench]'); see the table instead")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, NullFormatter
+
+    series = space_series(results)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.5), dpi=110, sharey=True)
+    colors = {"out": "#1f77b4", "in": "#d62728"}
+    values = [v for line in series.values() for v in line.values() if math.isfinite(v) and v > 0]
+    low, top = min([0.8, *[0.9 * v for v in values]]), max([1.5, *[1.3 * v for v in values]])
+    ticks = [t for t in (0.25, 0.5, 1, 2, 5, 10, 20, 50, 100, 200, 500) if low <= t <= top]
+    for ax, kind in zip(axes, KINDS, strict=True):
+        for (k, placement, family), line in sorted(series.items()):
+            if k != kind:
+                continue
+            counts = sorted(line)
+            ax.plot(counts, [line[n] for n in counts], ls="-" if family.startswith("opencl") else "--",
+                    marker=MARKERS.get(family.split()[0], "x"), color=colors[placement],
+                    label=f"{family}, {WHERE[placement]}")  # fmt: skip
+        ax.axhline(1.0, color="black", lw=0.8)
+        ax.axhline(SPACE_GOAL, color="#2ca02c", ls=":", lw=1.2)
+        ax.text(max(COUNTS), SPACE_GOAL, f"goal out of view: {SPACE_GOAL}x ", fontsize=8, color="#2ca02c", va="top",
+                ha="right")  # fmt: skip
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_ylim(low, top)
+        ax.set_xlim(0.75 * min(COUNTS), 1.33 * max(COUNTS))
+        ax.set_xticks(list(COUNTS))
+        ax.set_yticks(ticks)
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}x"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel(f"N: {kind} in the scene (log)")
+        ax.set_title(f"{kind}: frame time over the frame without them")
+        ax.grid(True, which="both", alpha=0.25)
+        if any(k == kind for k, _, _ in series):
+            ax.legend(fontsize=8)
+    axes[0].set_ylabel("paired frame-time ratio to N = 0 (log)")
+    size = results["config"]["size"]
+    fig.suptitle(f"aberrant bench: space count at {size[0]}x{size[1]} (a floor and 30 boxes in view)", fontsize=12)
+    fig.tight_layout(rect=(0, 0, 1, 0.94))
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    plt.close(fig)
+    return buffer.getvalue()

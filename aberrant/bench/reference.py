@@ -7,17 +7,21 @@ size and ``max_events`` and kept under ``$ABERRANT_CACHE_DIR/reference/``
 (:func:`engine.scene_file.scene_document`, with each mesh file replaced by
 its content hash so moving a file does not matter but editing it does), the
 camera, the size and the reference tracer's own source, so an edit to the
-reference invalidates every cached frame.
+reference invalidates every cached frame. :func:`render_ahead` fills the
+cache in several processes before a run measures anything.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import multiprocessing
 import os
 import tempfile
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
@@ -25,7 +29,7 @@ import numpy as np
 
 from backends.base import AOVS
 from backends.upload import SceneUploader
-from engine.camera_view import CameraView
+from engine.camera_view import CameraView, scene_camera
 from engine.scene import Scene
 from engine.scene_file import dumps, scene_document
 
@@ -147,3 +151,37 @@ class ReferenceCache:
             _save(path, frame)
         self._memory[key] = frame
         return frame
+
+
+#: One scene's share of :func:`render_ahead`: its bench name and the (max_events or ``None`` for its own, size)
+#: of each frame.
+Task = tuple[str, list[tuple[int | None, tuple[int, int]]]]
+
+
+def _render_task(task: tuple[Task, Path]) -> str:
+    """A worker's share: one bench scene's missing frames into the disk cache (a scene that does not build is
+    skipped: the measuring run records why)."""
+    from aberrant.bench.scenes import bench_scenes
+
+    (name, keys), folder = task
+    try:
+        scene = bench_scenes()[name].build(folder)
+    except Exception:  # reported by the run that measures it
+        return name
+    try:
+        camera, cache, own = scene_camera(scene), ReferenceCache(), scene.settings
+        for max_events, size in keys:
+            scene.settings = own if max_events is None else replace(own, max_events=max_events)
+            cache.get(scene, camera, size)
+    finally:
+        scene.close()
+    return name
+
+
+def render_ahead(tasks: list[Task], folder: Path, jobs: int, done: Callable[[str], object]) -> None:
+    """Render the bench scenes' missing frames in ``jobs`` spawned processes (``folder``: their mesh files);
+    ``done`` hears each scene's name as it finishes, in order."""
+    context = multiprocessing.get_context("spawn")  # the GL and OpenCL runtimes do not survive a fork
+    with ProcessPoolExecutor(jobs, mp_context=context) as pool:
+        for name in pool.map(_render_task, [(task, folder) for task in tasks]):
+            done(name)

@@ -13,6 +13,8 @@ from collections import defaultdict
 from typing import Any
 
 from aberrant.bench.embree import MODES
+from aberrant.bench.markdown import markdown_table
+from aberrant.bench.paired import hotel_section, space_section
 from aberrant.bench.sweeps import SWEEPS
 from engine.errors import AberrantError
 
@@ -48,12 +50,6 @@ def _pct(fraction: float | None) -> str:
 
 def _ratio(value: float | None) -> str:
     return "–" if value is None else f"{value:.2f}x"
-
-
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(cell.replace("|", "/") for cell in row) + " |" for row in rows]
-    return out
 
 
 def base_rows(results: dict[str, Any]) -> dict[tuple[str, str], dict[str, Any]]:
@@ -126,7 +122,7 @@ def _targets(results: dict[str, Any]) -> list[str]:
                 _mark(ok),
             ]
         )
-    return ["## Targets", "", *_table(["target", "measured", "goal", "status"], rows), ""]
+    return ["## Targets", "", *markdown_table(["target", "measured", "goal", "status"], rows), ""]
 
 
 def _headline(results: dict[str, Any]) -> list[str]:
@@ -140,7 +136,7 @@ def _headline(results: dict[str, Any]) -> list[str]:
             if row is None:
                 cells.append("–")
             elif row["status"] != "ok":
-                cells.append("unsupported" if row["status"].startswith("unsupported") else "error")
+                cells.append(row["status"].split(":")[0])  # unsupported, error or skipped
             else:
                 ratio = f" ({_ratio(best_ratio(row))})" if row.get("embree_ratio") is not None else ""
                 cells.append(f"{_num(row['mrays_per_s'])}{ratio}")
@@ -155,7 +151,7 @@ def _headline(results: dict[str, Any]) -> list[str]:
         "Ratios are *paired*: Embree's trace of the same rays alternates with the backend's frames, so both see "
         "the same background load; the median of the per-pair ratios.",
         "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
         "",
     ]
 
@@ -193,7 +189,7 @@ def _overhead(results: dict[str, Any]) -> list[str]:
         "after 5 warm-up ticks; the backend's render is replaced by a no-op, everything else is the real "
         "App (the render system's own work included).",
         "",
-        *_table(header, rows),
+        *markdown_table(header, rows),
         "",
     ]
 
@@ -231,7 +227,7 @@ def _embree(results: dict[str, Any]) -> list[str]:
             "mismatch vs reference",
             "depth p99 vs reference",
         ]
-        out += [*_table(header, rows), ""]
+        out += [*markdown_table(header, rows), ""]
     out += [f"- {n}" for n in notes] + ([""] if notes else [])
     return out
 
@@ -288,7 +284,7 @@ def _detail(results: dict[str, Any]) -> list[str]:
                     str(e["nan_count"]),
                 ]
             )
-        out += [*_table(header, table), ""]
+        out += [*markdown_table(header, table), ""]
     return out
 
 
@@ -303,7 +299,7 @@ def _problems(results: dict[str, Any]) -> list[str]:
         [scene, backend, f"{len(labels)} ({', '.join(labels[:3])}{', …' if len(labels) > 3 else ''})", status]
         for (scene, backend, status), labels in groups.items()
     ]
-    return ["## Cells that did not run", "", *_table(["scene", "backend", "settings", "status"], rows), ""]
+    return ["## Cells that did not run", "", *markdown_table(["scene", "backend", "settings", "status"], rows), ""]
 
 
 def _swept(results: dict[str, Any]) -> list[str]:
@@ -367,6 +363,13 @@ def render_report(results: dict[str, Any]) -> str:
     ]
     lines += _targets(results) + _headline(results)
     lines += ["## Speed against error", "", "![frame time against error](speed_vs_error.png)", ""]
-    lines += [results.get("plot_note", ""), "", *_overhead(results), *_embree(results)]
+    lines += [
+        results.get("plot_note", ""),
+        "",
+        *space_section(results),
+        *hotel_section(results),
+        *_overhead(results),
+        *_embree(results),
+    ]
     lines += _detail(results) + _problems(results) + _swept(results)
     return "\n".join(lines).rstrip() + "\n"

@@ -1,9 +1,10 @@
 """``aberrant bench``: every chosen backend and setting on every chosen scene, then the report, all at once.
 
 The run measures (cells, Embree, engine overhead), then renders
-``report.md``, ``results.json`` and ``speed_vs_error.png`` in memory and
-writes the three through temporary files and renames: an interrupted or
-failed run never leaves a half-written report beside an old plot.
+``report.md``, ``results.json`` and ``speed_vs_error.png`` (and
+``space_count.png`` when the run measured that sweep) in memory and writes
+them through temporary files and renames: an interrupted or failed run
+never leaves a half-written report beside an old plot.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
 from aberrant.bench.metrics import compare
 from aberrant.bench.overhead import measure_overhead
-from aberrant.bench.plot import plot_png
-from aberrant.bench.reference import ReferenceCache
+from aberrant.bench.paired import SPACE_PLOT, has_space
+from aberrant.bench.plot import plot_png, space_plot_png
+from aberrant.bench.reference import ReferenceCache, render_ahead
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
@@ -57,6 +59,11 @@ class BenchConfig:
     overhead: bool = True
     embree: bool = True
     command: str = ""
+    #: Worker processes that render the missing reference frames before anything is timed (1: none, lazily).
+    jobs: int = 1
+    #: Seconds after which the scenes not yet begun are skipped (their rows say so), so a run on borrowed
+    #: time still writes its report; ``None``: no limit.
+    time_limit_s: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -67,6 +74,8 @@ class BenchConfig:
             "quick": self.quick,
             "sweeps": self.sweeps,
             "command": self.command,
+            "jobs": self.jobs,
+            "time_limit_s": self.time_limit_s,
         }
 
 
@@ -86,6 +95,8 @@ def make_config(
     sweeps: list[str] | None = None,
     overhead: bool = True,
     command: str = "",
+    jobs: int = 1,
+    time_limit_s: float | None = None,
 ) -> BenchConfig:
     """Check every argument before anything runs.
 
@@ -99,6 +110,10 @@ def make_config(
     repeat = (QUICK_REPEAT if quick else FULL_REPEAT) if repeat is None else repeat
     if not 1 <= repeat <= 1000:
         raise AberrantError(f"--repeat must lie in [1, 1000], got {repeat}")
+    if not 1 <= jobs <= 256:
+        raise AberrantError(f"--jobs must lie in [1, 256], got {jobs}")
+    if time_limit_s is not None and not time_limit_s > 0:
+        raise AberrantError(f"--time-limit must be positive, got {time_limit_s:g}")
     sweep_names = check_sweeps(_names(sweeps)) if sweeps else list(QUICK_SWEEPS if quick else check_sweeps(["all"]))
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
@@ -114,6 +129,8 @@ def make_config(
         overhead,
         True,
         command,
+        jobs,
+        time_limit_s,
     )
 
 
@@ -135,8 +152,27 @@ def _plan(config: BenchConfig) -> list[Setting]:
 
 
 def _cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
-    """A fixed-size scene skips the size sweep: only its own size tests what it is for."""
+    """A fixed-size scene skips the size sweep (only its own size tests what it is for); a ``base_only`` one
+    every sweep (it is a point of its own)."""
+    if spec.base_only:
+        return [s for s in settings if s.sweep == ""]
     return [s for s in settings if not (spec.size and s.sweep == "size")]
+
+
+def _reference_keys(
+    spec: SceneSpec, config: BenchConfig, settings: list[Setting]
+) -> list[tuple[int | None, tuple[int, int]]]:
+    """The (max_events, size) of every reference frame the scene's cells compare with."""
+    cells = _cells(spec, settings)
+    return sorted({(s.max_events, spec.size or s.size_for(config.size)) for s in cells}, key=str)
+
+
+def render_references(config: BenchConfig, settings: list[Setting], progress: Progress) -> None:
+    """Every reference frame the run will compare with, rendered in ``config.jobs`` processes, so the
+    measuring that follows finds them in the disk cache (the float64 tracer is the slow part of a run)."""
+    tasks = [(spec.name, _reference_keys(spec, config, settings)) for spec in config.scenes]
+    progress.note(f"reference frames: {len(config.scenes)} scenes in {config.jobs} processes")
+    render_ahead(tasks, asset_dir(), config.jobs, lambda name: progress.show(f"reference frames: {name}"))
 
 
 def _embree_rows(
@@ -177,6 +213,20 @@ def _pair(
     return anchor.tracer(size, entry["best"]) if entry.get("status") == "ok" else None
 
 
+def _unmeasured(
+    spec: SceneSpec, config: BenchConfig, todo: list[Setting], why: str, progress: Progress
+) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
+    """The scene's facts, anchor and rows when its cells cannot be measured: each row says ``why``."""
+    info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
+            "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
+            "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
+    rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
+             "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
+             "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
+    progress.step(spec.name, len(todo))
+    return info, {"status": why}, rows
+
+
 def _measure_scene(
     spec: SceneSpec,
     config: BenchConfig,
@@ -197,14 +247,7 @@ def _measure_scene(
         if scene is not None:
             scene.close()
         why = f"error: the scene failed to build: {type(e).__name__}: {' '.join(str(e).split())}"
-        info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
-                "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
-                "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
-        rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
-                 "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
-                 "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
-        progress.step(spec.name, len(todo))
-        return info, {"status": why}, rows
+        return _unmeasured(spec, config, todo, why, progress)
     rows = []
     baseline = None
     try:
@@ -247,15 +290,21 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
     anchor = embree.EmbreeAnchor(config.repeat) if embree_reason is None else None
     total = sum(len(_cells(spec, settings)) for spec in config.scenes)
     progress = Progress(total, stream)
+    if config.jobs > 1:
+        render_references(config, settings, progress)
     progress.note(f"aberrant bench: {len(config.scenes)} scenes x {len(settings)} settings = {total} cells")
     rows: list[dict[str, Any]] = []
     scenes: dict[str, Any] = {}
     anchors: dict[str, Any] = {}
     try:
         for spec in config.scenes:
-            info, scene_anchor, scene_rows = _measure_scene(
-                spec, config, settings, cells, anchor, embree_reason, progress
-            )
+            if config.time_limit_s is not None and time.time() - started > config.time_limit_s:
+                why = f"skipped: the run's time limit ({config.time_limit_s:g} s) was reached"
+                info, scene_anchor, scene_rows = _unmeasured(spec, config, _cells(spec, settings), why, progress)
+            else:
+                info, scene_anchor, scene_rows = _measure_scene(
+                    spec, config, settings, cells, anchor, embree_reason, progress
+                )
             scenes[spec.name], anchors[spec.name] = info, scene_anchor
             rows += scene_rows
         overhead = []
@@ -314,15 +363,24 @@ def _clean(value: Any) -> Any:
 
 
 def write_outputs(results: dict[str, Any], out: Path) -> list[Path]:
-    """Render the report and the plot, then write all three files atomically."""
+    """Render the report and the plots, then write the files atomically.
+
+    ``space_count.png`` is written when the run measured the space-count sweep; otherwise an earlier run's is
+    removed, so the folder never holds a plot its report does not show.
+    """
     out.mkdir(parents=True, exist_ok=True)
     png, plot_note = plot_png(results)
     results["plot_note"] = plot_note
     text = render_report(results)
     data = json.dumps(_clean(results), indent=1, allow_nan=False).encode()
-    paths = [out / name for name in OUTPUTS]
-    write_atomically(dict(zip(paths, (text.encode(), data, png), strict=True)))
-    return paths
+    files = dict(zip([out / name for name in OUTPUTS], (text.encode(), data, png), strict=True))
+    space_plot = out / SPACE_PLOT
+    if has_space(results):
+        files[space_plot] = space_plot_png(results)
+    write_atomically(files)
+    if not has_space(results):
+        space_plot.unlink(missing_ok=True)
+    return list(files)
 
 
 def rerender(results_path: Path, out: Path) -> list[Path]:

@@ -3,9 +3,10 @@
 One registry (:func:`bench_scenes`) names every scene with how to build it,
 whether it has a fixed frame size (the watertightness views aim pixel
 centres at mesh vertices and edges, so only their own size tests anything),
-and its group (``bench``, ``demos``, ``hard``, ``overhead``). Builders take a
-folder for the mesh files they generate, so the files are made once and the
-scenes stay plain scene objects.
+and its group (``bench``, ``demos``, ``hard``, ``overhead``,
+``architecture``, ``hotel``, ``space-count``). Builders take a folder for
+the mesh files they generate, so the files are made once and the scenes
+stay plain scene objects.
 """
 
 from __future__ import annotations
@@ -18,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from aberrant.bench.architecture import architecture_cases, hotel_views
+from aberrant.bench.space import PLAIN, space_cases, thirty_boxes
 from components import Transform
 from engine.errors import AberrantError
 from engine.scene import Scene
@@ -209,6 +212,8 @@ class SceneSpec:
     description: str = ""
     #: The plain scene this one adds deformed space to: its frames alternate with this scene's.
     baseline: Callable[[Path], Scene] | None = None
+    #: Only each backend's base setting: the scene is itself one point of a sweep (``space-count``).
+    base_only: bool = False
 
 
 def _demo_builder(name: str) -> Callable[[Path], Scene]:
@@ -270,6 +275,13 @@ def _specs() -> dict[str, SceneSpec]:
             baseline=ten_boxes,
         ),
     ]
+    specs += [SceneSpec(name, build, "architecture", description=text) for name, build, text in architecture_cases()]
+    for name, build, plain, text in hotel_views():
+        specs.append(SceneSpec(name, build, "hotel", description=text, baseline=plain, base_only=True))
+    specs.append(SceneSpec(PLAIN, thirty_boxes, "space-count", description="30 boxes and a floor", base_only=True))
+    for name, build, description in space_cases():
+        specs.append(SceneSpec(name, build, "space-count", description=description, baseline=thirty_boxes,
+                               base_only=True))  # fmt: skip
     return {spec.name: spec for spec in specs}
 
 
@@ -279,7 +291,7 @@ def bench_scenes() -> dict[str, SceneSpec]:
 
 
 #: Names that stand for several scenes on the command line.
-GROUPS: tuple[str, ...] = ("all", "bench", "demos", "hard", "overhead")
+GROUPS: tuple[str, ...] = ("all", "bench", "demos", "hard", "overhead", "architecture", "hotel", "space-count")
 
 #: What ``--quick`` measures: one of each kind, small.
 QUICK_SCENES: tuple[str, ...] = (

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import require_backend
 from PIL import Image
 
 from aberrant.bench import embree, metrics, plot, reference
@@ -151,6 +152,8 @@ def test_reference_cache_dir_follows_the_environment(monkeypatch, tmp_path):
         (["--size", "0x10"], "--size width must lie in"),
         (["--repeat", "0"], "--repeat must lie in"),
         (["--sweeps", "colour"], "unknown sweep 'colour'"),
+        (["--jobs", "0"], "--jobs must lie in"),
+        (["--time-limit", "0"], "--time-limit must be positive"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2(capsys, tmp_path, argv, message):
@@ -236,6 +239,28 @@ def test_without_embreex_every_row_says_so(monkeypatch, tmp_path):
     assert row["status"] == "ok" and row["embree_ratio"] is None and row["embree_note"] == embree.NOT_INSTALLED
     write_outputs(results, tmp_path)
     assert embree.NOT_INSTALLED in (tmp_path / "report.md").read_text()
+
+
+def test_jobs_render_every_reference_frame_before_measuring(monkeypatch, tmp_path):
+    """With --jobs, worker processes fill the disk cache first: the measuring finds every frame there."""
+    require_backend("glsl")
+    monkeypatch.setenv("ABERRANT_CACHE_DIR", str(tmp_path / "cache"))
+    config = make_config(scenes=["ten-boxes"], backends=["glsl"], size=(16, 12), repeat=1, out=tmp_path,
+                         sweeps=["max_events", "size"], overhead=False, jobs=2)  # fmt: skip
+    results = run_bench(config, io.StringIO())
+    keys = {(r["max_events"], tuple(r["size"])) for r in results["rows"] if r["status"] == "ok"}
+    assert len(keys) >= 3
+    assert results["reference_cache"]["misses"] == 0 and results["reference_cache"]["hits"] == len(keys)
+
+
+def test_a_run_past_its_time_limit_skips_the_rest_and_still_reports(tmp_path):
+    config = make_config(scenes=["ten-boxes", "far-ten-boxes"], backends=["reference"], size=(16, 12), repeat=1,
+                         out=tmp_path, sweeps=["none"], overhead=False, time_limit_s=1e-9)  # fmt: skip
+    results = run_bench(config, io.StringIO())
+    assert [r["status"] for r in results["rows"]] == ["skipped: the run's time limit (1e-09 s) was reached"] * 2
+    write_outputs(results, tmp_path)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Cells that did not run" in report and "| ten-boxes |" in report
 
 
 def test_every_quick_scene_is_registered():

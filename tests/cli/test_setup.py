@@ -24,7 +24,8 @@ def run_make(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
 
 @needs_make
 @pytest.mark.parametrize(
-    "target", ["test", "demo", "bench", "bench-pytest", "gallery", "docs", "lint", "clean", "setup", "help"]
+    "target",
+    ["test", "demo", "bench", "bench-gpu", "bench-pytest", "gallery", "docs", "lint", "clean", "setup", "help"],
 )
 def test_make_targets_parse(target):
     result = run_make("-n", target)
@@ -42,6 +43,12 @@ def test_make_demo_renders_the_tunnels_image_and_flythrough():
 def test_make_bench_writes_the_report():
     plan = run_make("-n", "bench").stdout
     assert 'aberrant" bench --out out/bench' in plan
+
+
+@needs_make
+def test_make_bench_gpu_runs_the_script_into_docs():
+    plan = run_make("-n", "bench-gpu").stdout
+    assert 'scripts/bench_gpu.sh run "docs/bench/gpu"' in plan
 
 
 def test_make_bench_pytest_runs_benchmarks_despite_skip_in_addopts():

@@ -108,6 +108,7 @@ SHOWCASE = (
     "bigger_inside",
     "nested_aberrations",
     "portal_in_aberration",
+    "hotel",
 )
 #: What must be seen through portals at the demo's camera: (at least this many events, mesh name prefixes).
 THROUGH_PORTALS: dict[str, list[tuple[int, tuple[str, ...]]]] = {
@@ -115,6 +116,7 @@ THROUGH_PORTALS: dict[str, list[tuple[int, tuple[str, ...]]]] = {
     "house": [(1, ("hall_",)), (2, ("gallery_",))],
     "endless_corridor": [(2, ("globe", "arch_", "floor", "runner", "west_", "east_"))],
     "portal_in_aberration": [(1, ("hall_",)), (2, ("garden_", "fountain_", "tree_", "hedge_"))],
+    "hotel": [(1, ("room",))],
 }
 #: Where the flythrough may end up off its last stop (the spline rounds corners; ticks are chords of it).
 WALK_TOLERANCE = 0.35
