@@ -10,7 +10,7 @@ rules, so a drift between host and kernel is caught on the host.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``):
+  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``, ``space_nodes``):
   always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
   may traverse them. ``bvh_nodes`` has one of four dtypes, chosen by the
@@ -179,13 +179,21 @@ def bvh_compact(nodes: np.ndarray) -> bool:
 #: instance's world bounds grown by a margin (the exact ones are on the instance row).
 TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 
+#: A node of the trees over portal quads and aberration boxes (``engine.packing_space``), the BVH node's 32
+#: bytes, as :data:`TLAS_NODE_DTYPE`: ``count == 1``, a leaf over portal or aberration row ``first``;
+#: ``count == 0``, an interior node whose children are ``first`` and ``first + 1``. One table holds both
+#: trees, the portals' from row 0, the boxes' from the settings' ``space_roots.y``. A leaf's bounds hold its
+#: quad's or box's world bounds, grown by a margin and by :data:`engine.tlas.SPACE_SLACK` of their size.
+SPACE_NODE_DTYPE = BVH_NODE_DTYPE
+
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
 MATERIAL_DTYPE = _build([("color", "float4", 1), ("flags", "int4", 1)], "f32")
 
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
 #: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
-#: aberrations, portals, max_events)``.
+#: aberrations, portals, max_events)``; ``space_roots = (portal tree root, box tree root, 0, 0)``,
+#: rows of ``space_nodes``.
 SETTINGS_DTYPE = _build(
     [
         ("background", "float4", 1),
@@ -193,6 +201,7 @@ SETTINGS_DTYPE = _build(
         ("event_limit_color", "float4", 1),
         ("shading", "float4", 1),
         ("counts", "int4", 1),
+        ("space_roots", "int4", 1),
     ],
     "f32",
 )
@@ -304,6 +313,7 @@ TABLES: tuple[str, ...] = (
     "portals",
     "tlas_nodes",
     "triangle_blocks",
+    "space_nodes",
 )
 
 
@@ -317,6 +327,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "materials": MATERIAL_DTYPE,
         "tlas_nodes": TLAS_NODE_DTYPE,
         "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
+        "space_nodes": SPACE_NODE_DTYPE,
     }
     if name in fixed:
         return fixed[name]

@@ -26,6 +26,7 @@ layout(rgba32ui, binding = 7) readonly restrict uniform uimage2D aberrations_img
 layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
 layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D tlas_nodes_img;
 layout(rgba32ui, binding = 10) readonly restrict uniform uimage2D triangle_blocks_img;
+layout(rgba32ui, binding = 11) readonly restrict uniform uimage2D space_nodes_img;
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -51,6 +52,7 @@ Settings fetch_settings_()
     s.event_limit_color = F4_AT_(settings_img, 2);
     s.shading = F4_AT_(settings_img, 3);
     s.counts = I4_AT_(settings_img, 4);
+    s.space_roots = I4_AT_(settings_img, 5);
     return s;
 }
 
@@ -187,6 +189,15 @@ TlasNode fetch_tlas_node_(int i)
     return n;
 }
 
+SpaceNode fetch_space_node_(int i)
+{
+    int b = i * SPACE_NODES_STRIDE;
+    SpaceNode n;
+    n.lo = F4_AT_(space_nodes_img, b);
+    n.hi = F4_AT_(space_nodes_img, b + 1);
+    return n;
+}
+
 Camera fetch_camera_()
 {
     Camera c;
@@ -213,6 +224,7 @@ Camera fetch_camera_()
 #define PORTAL(i) (fetch_portal_(i))
 #define TLAS_NODE(i) (fetch_tlas_node_(i))
 #define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
+#define SPACE_NODE(i) (fetch_space_node_(i))
 #define CAMERA_ROW (fetch_camera_())
 
 #else /* storage buffers */
@@ -227,6 +239,7 @@ layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberratio
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
 layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
 layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
+layout(std430, binding = 10) readonly restrict buffer SpaceNodeTable { SpaceNode space_nodes_data[]; };
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -240,6 +253,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define PORTAL(i) (portals_data[(i)])
 #define TLAS_NODE(i) (tlas_nodes_data[(i)])
 #define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
+#define SPACE_NODE(i) (space_nodes_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 
 #endif

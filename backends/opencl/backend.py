@@ -31,7 +31,7 @@ from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.layout import Precision
-from engine.packed import PackedScene, TableUpdate
+from engine.packed import Features, PackedScene, TableUpdate
 
 if TYPE_CHECKING:  # pyopencl is imported lazily: importing this module must not need it
     import pyopencl as cl
@@ -367,8 +367,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
 
     # --- programs -----------------------------------------------------------------------
 
-    def _defines(self) -> dict[str, int]:
-        defines: dict[str, int] = dict(self._features.defines())
+    def _defines(self, features: Features | None = None) -> dict[str, int]:
+        defines: dict[str, int] = dict((features or self._features).defines())
         defines.update(
             REAL_IS_DOUBLE=int(self.precision == "f64"),
             # Double helpers of the float tracer, only with fp64. Exact signs for edge functions that are
@@ -379,6 +379,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
             WORLD_FP64=int(self.fp64),
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
+            **self._space,
         )
         defines.update(self.extra_defines)
         return defines
@@ -433,9 +434,11 @@ class OpenClBackend(shared.UploadedScene, Backend):
         cl = self._cl
         queue = self._queue
         start = time.perf_counter()
-        kernel = self._kernel(self._defines())
+        kernel = self._kernel(self._defines(self._frame_features(camera, width, height)))
         self._ensure_outputs(width, height, aovs)
-        self._camera_row = pack_camera(camera, self._origin, self.precision, width, height, self._boxes, self._bounds)
+        self._camera_row = pack_camera(
+            camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
+        )
         cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         args: list[object] = [self._tables[name] for name in layout.TABLES]
         args.append(self._camera)

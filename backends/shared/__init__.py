@@ -22,7 +22,9 @@ import numpy as np
 
 from engine import layout
 from engine.box_clearance import instance_bounds
+from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
+from engine.tlas import rows_at
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
 #: and its bindings: each builds on those before it (core.h's records and helpers first, the
@@ -152,6 +154,44 @@ def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
     return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)
 
 
+#: Above this many portals (boxes) the kernels find them through their tree (PORTAL_TREE, BOX_TREE), below
+#: it with a loop over all, which is as fast there (measured: scripts/space_scale.py).
+PORTAL_TREE_MIN = 8
+BOX_TREE_MIN = 8
+
+
+def tree_depth(nodes: np.ndarray, root: int) -> int:
+    """Levels of the binary tree of ``nodes`` (TLAS layout: ``count == 0`` interior) from row ``root``."""
+    frontier = np.array([root], np.int64)
+    depth = 0
+    while frontier.size and depth <= len(nodes):
+        depth += 1
+        inner = frontier[nodes["count"][frontier] == 0]
+        first = nodes["first"][inner].astype(np.int64)
+        frontier = np.concatenate([first, first + 1])
+    return depth
+
+
+def space_defines(packed: PackedScene) -> dict[str, int]:
+    """PORTAL_TREE, BOX_TREE and SPACE_STACK_SIZE for a packed scene: a tree where there are enough portals or
+    boxes to pay for it, a stack as deep as the deeper tree (rounded up to 8, so few variants exist)."""
+    portals, boxes = packed.counts.get("portals", 0), packed.counts.get("aberrations", 0)
+    nodes, roots = packed.tables["space_nodes"], packed.tables["settings"]["space_roots"][0]
+    use_portals, use_boxes = portals > PORTAL_TREE_MIN, boxes > BOX_TREE_MIN
+    depth = max(
+        tree_depth(nodes, int(roots[0])) if use_portals else 0, tree_depth(nodes, int(roots[1])) if use_boxes else 0
+    )
+    return {
+        "PORTAL_TREE": int(use_portals),
+        "BOX_TREE": int(use_boxes),
+        "SPACE_STACK_SIZE": max(MIN_SPACE_STACK, -(-depth // 8) * 8),
+    }
+
+
+#: The smallest stack of the trees over portals and boxes.
+MIN_SPACE_STACK = 16
+
+
 class UploadedScene:
     """Mixin of the fast backends: what they keep of their last upload. The tree defines, stack sizes
     and features pick the kernel variant; origin, boxes and instance bounds pack the camera row."""
@@ -160,10 +200,14 @@ class UploadedScene:
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._boxes: np.ndarray | None = None
+        self._box_tree: tuple[np.ndarray, int] | None = None
+        self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
+        self._portal_root: int | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._features = Features()
         self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
         self._tlas_stack = MIN_TLAS_STACK
+        self._space: dict[str, int] = {"PORTAL_TREE": 0, "BOX_TREE": 0, "SPACE_STACK_SIZE": MIN_SPACE_STACK}
         self._uploaded = False
 
     def _note_upload(self, packed: PackedScene, rewritten: set[str]) -> None:
@@ -172,11 +216,37 @@ class UploadedScene:
             self._bvh = bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         if "tlas_nodes" in rewritten:
             self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
+        if rewritten & {"space_nodes", "portals", "aberrations"}:
+            self._space = space_defines(packed)
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
         self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
+        # ... and the trees over the boxes and the portals, to find it among many and to see what the camera sees.
+        nodes, roots = packed.tables["space_nodes"].copy(), packed.tables["settings"]["space_roots"][0]
+        self._space_nodes = nodes
+        self._box_tree = (nodes, int(roots[1])) if self._boxes.size else None
+        self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
         self._features = packed.features
         self._uploaded = True
+
+    def _frame_features(self, camera: CameraView, width: int, height: int) -> Features:
+        """The features a frame needs: none of the space's where the host proves that no primary ray meets a
+        portal or a box (all outside the camera's pyramid, the camera in no box). Every ray then has one leg,
+        and the Euclidean variant gives the same frame without paying for the space's code."""
+        features = self._features
+        if not (features.portals or features.aberration_modes):
+            return features
+        aspect = width / height
+        portals = features.portals and self._portal_root is not None
+        if portals and view_reaches(camera, aspect, self._origin, self._space_nodes, self._portal_root):
+            return features
+        if features.aberration_modes and self._box_tree is not None:
+            nodes, root = self._box_tree
+            position = np.asarray(camera.position, dtype=np.float64) - self._origin
+            near = CAMERA_FACE_MARGIN * max(1.0, float(np.linalg.norm(position)))
+            if view_reaches(camera, aspect, self._origin, nodes, root) or rows_at(nodes, root, position, near):
+                return features
+        return Features(False, frozenset(), features.max_events)

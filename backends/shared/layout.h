@@ -11,13 +11,15 @@
  */
 
 /* settings: one row. shading = (ambient, 0, 0, 0);
- * counts = (instances, aberrations, portals, max_events). */
+ * counts = (instances, aberrations, portals, max_events);
+ * space_roots = (portal tree root, box tree root, 0, 0), rows of space_nodes. */
 STRUCT_BEGIN(Settings)
     float4 background;
     float4 light_dir;
     float4 event_limit_color;
     float4 shading;
     int4 counts;
+    int4 space_roots;
 STRUCT_END(Settings)
 
 /* triangles: object-space vertices of every mesh asset (w unused). */
@@ -165,6 +167,15 @@ STRUCT_BEGIN(TlasNode)
     float4 lo;
     float4 hi;
 STRUCT_END(TlasNode)
+
+/* space_nodes: the trees over portal quads and aberration boxes (engine/packing_space.py), the
+ * TlasNode's layout: AS_INT(hi.w) = count; count == 1: a leaf over portal or aberration row
+ * AS_INT(lo.w); count == 0: an interior node whose children are AS_INT(lo.w) and AS_INT(lo.w) + 1.
+ * The portals' tree from row space_roots.x, the boxes' from space_roots.y (settings). */
+STRUCT_BEGIN(SpaceNode)
+    float4 lo;
+    float4 hi;
+STRUCT_END(SpaceNode)
 
 /* camera: one row per frame. position is camera-relative; right/up/back are the
  * columns of R_cam; origin is the packed origin (for world-space checkers);

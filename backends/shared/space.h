@@ -45,6 +45,69 @@ real tie_window(real o_len, real t)
 {
     return TIE_RELATIVE * max(REAL(1.0f), o_len + t);
 }
+
+/* Whether a candidate at t with key (a portal row, or a box row) comes before the best so far at best_t with
+ * best_key: the nearer, ties to the lower key. Searching rows in ascending order, the tie never decides (the
+ * loops), so a tree that finds them in any order gives the loops' answer. */
+bool earlier(real t, int key, real best_t, int best_key)
+{
+    return t < best_t || (t == best_t && key < best_key);
+}
+#endif
+
+/* --- the trees over portals and boxes (space_nodes, engine/packing_space.py) ----------------------- */
+
+#if PORTAL_TREE || BOX_TREE
+/* A ray's set-up for a space tree: 1/r (safe_inverse) and its padding in t per axis, SPACE_PAD * max(1, |o|)
+ * world units over each |r_k|. */
+STRUCT_BEGIN(SpaceRay)
+    real3 inv;
+    real3 pad;
+STRUCT_END(SpaceRay)
+
+SpaceRay space_ray(real3 o, real3 r)
+{
+    SpaceRay sr;
+    sr.inv = safe_inverse(r);
+    sr.pad = (SPACE_PAD * max(REAL(1.0f), length(o))) * ABS(sr.inv);
+    return sr;
+}
+
+/* Entry and exit t of a ray against a space tree's node grown by the ray's padding. The host grew the
+ * leaves by SPACE_SLACK of their own coordinates' size; the two cover the rounding of the quad and box
+ * tests in their local frames, so a ray those tests accept is always inside (docs/semantics.md section 14).
+ * A SLAB for BINARY_STEP (core.h). */
+real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
+{
+    real3 t0 = (TO_REAL3(n.lo.xyz) - o) * sr.inv;
+    real3 t1 = (TO_REAL3(n.hi.xyz) - o) * sr.inv;
+    real3 tn = min(t0, t1) - sr.pad;
+    real3 tf = max(t0, t1) + sr.pad;
+    return R2(max(max(tn.x, tn.y), tn.z), min(min(tf.x, tf.y), tf.z));
+}
+
+/* The leaves of a space tree from root that the ray (o, r) enters within (t_min, best.t], nearest first:
+ * SPACE_LEAVES_BEGIN(root) declares the traversal and stands at each leaf with its row in `leaf`, for the
+ * caller's test (which may lower best.t); SPACE_LEAVES_END pops to the next. While-while, as the tree over
+ * instances (instances.h): the leaf test runs outside the descent loop. */
+#define SPACE_LEAVES_BEGIN(root)                                                                     \
+    SpaceRay sr = space_ray(o, r);                                                                   \
+    int stack_node[SPACE_STACK_SIZE];                                                                \
+    real stack_t[SPACE_STACK_SIZE];                                                                  \
+    int sp = 0;                                                                                      \
+    SpaceNode node = SPACE_NODE(root);                                                               \
+    bool more = slab_hit(space_slab(o, sr, node), t_min, best.t);                                    \
+    while (more) {                                                                                   \
+        while (AS_INT(node.hi.w) == 0 && more) {                                                     \
+            int first = AS_INT(node.lo.w);                                                           \
+            BINARY_STEP(SpaceNode, SPACE_NODE, SPACE_STACK_SIZE, space_slab, o, sr, first, more)      \
+        }                                                                                            \
+        if (more) {                                                                                  \
+            int leaf = AS_INT(node.lo.w);
+#define SPACE_LEAVES_END                                                                             \
+            BINARY_POP(SPACE_NODE, more)                                                             \
+        }                                                                                            \
+    }
 #endif
 
 /* --- aberrations (DESIGN.md section 6, docs/semantics.md rules 3-9; reference/aberrations.py) --- */
@@ -86,68 +149,122 @@ BoxSpan box_axis(BoxSpan span, real a, real v, int k)
     return span;
 }
 
-/* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
- * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
- * lower row, then the entry face. */
-FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+/* Box b's faces as candidates after best (aberrations.nearest_box_faces): its entry face, then its exit face,
+ * each crossed with t_min < t and not skip; and the box's clearance where the segment from t_min lies in it. */
+FORCE_INLINE Event box_faces(SCENE_DECL Event best, int b, real3 o, real3 r, real t_min, int skip)
 {
-    Event best = no_event();
-    int count = SETTINGS.counts.y;
-    for (int b = 0; b < count; ++b) {
-        Aberration box = ABERRATION(b);
-        real3 a = affine_point(box.w2l0, box.w2l1, box.w2l2, o);
-        real3 v = linear_vector(box.w2l0, box.w2l1, box.w2l2, r);
-        BoxSpan span;
-        span.t_near = -REAL_MAX;
-        span.t_far = REAL_MAX;
-        span.near_face = -1;
-        span.far_face = -1;
-        span = box_axis(span, a.x, v.x, 0);
-        span = box_axis(span, a.y, v.y, 1);
-        span = box_axis(span, a.z, v.z, 2);
-        if (span.t_near <= span.t_far) {
-            int id = BOX_FACES * b + span.near_face;
-            if (span.near_face >= 0 && span.t_near > t_min && span.t_near < best.t && id != skip) {
-                best.t = span.t_near;
+    Aberration box = ABERRATION(b);
+    real3 a = affine_point(box.w2l0, box.w2l1, box.w2l2, o);
+    real3 v = linear_vector(box.w2l0, box.w2l1, box.w2l2, r);
+    BoxSpan span;
+    span.t_near = -REAL_MAX;
+    span.t_far = REAL_MAX;
+    span.near_face = -1;
+    span.far_face = -1;
+    span = box_axis(span, a.x, v.x, 0);
+    span = box_axis(span, a.y, v.y, 1);
+    span = box_axis(span, a.z, v.z, 2);
+    if (span.t_near <= span.t_far) {
+        int id = BOX_FACES * b + span.near_face;
+        if (span.near_face >= 0 && span.t_near > t_min && earlier(span.t_near, b, best.t, best.row / BOX_FACES) &&
+            id != skip) {
+            best.t = span.t_near;
+            best.kind = EVENT_ABERRATION;
+            best.row = id;
+            best.far = span.t_far;
+            best.gap = box.rot1.w;
+        }
+        id = BOX_FACES * b + span.far_face;
+        if (span.far_face >= 0 && span.t_far > t_min && id != skip) {
+            if (earlier(span.t_far, b, best.t, best.row / BOX_FACES)) {
+                best.t = span.t_far;
                 best.kind = EVENT_ABERRATION;
                 best.row = id;
-                best.far = span.t_far;
+                best.far = -REAL_MAX;
                 best.gap = box.rot1.w;
             }
-            id = BOX_FACES * b + span.far_face;
-            if (span.far_face >= 0 && span.t_far > t_min && id != skip) {
-                if (span.t_far < best.t) {
-                    best.t = span.t_far;
-                    best.kind = EVENT_ABERRATION;
-                    best.row = id;
-                    best.far = -REAL_MAX;
-                    best.gap = box.rot1.w;
-                }
 #if SKIP_CLEAR_SEARCH
-                /* The segment from t_min to this exit lies in the box: its clearance bounds the reach. */
-                if (span.t_near <= t_min) {
-                    best.clear = max(best.clear, box.rot0.w);
-                }
-#endif
+            /* The segment from t_min to this exit lies in the box: its clearance bounds the reach. */
+            if (span.t_near <= t_min) {
+                best.clear = max(best.clear, box.rot0.w);
             }
+#endif
         }
     }
     return best;
 }
 
+/* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
+ * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
+ * lower row, then the entry face. BOX_TREE: the boxes the ray enters, from the tree; else every box. */
+FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+{
+    Event best = no_event();
+#if BOX_TREE
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.y)
+    best = box_faces(SCENE_PASS best, leaf, o, r, t_min, skip);
+    SPACE_LEAVES_END
+#else
+    int count = SETTINGS.counts.y;
+    for (int b = 0; b < count; ++b) {
+        best = box_faces(SCENE_PASS best, b, o, r, t_min, skip);
+    }
+#endif
+    return best;
+}
+
+/* Whether box b's closed unit box holds p. */
+bool box_holds(SCENE_DECL int b, real3 p)
+{
+    Aberration box = ABERRATION(b);
+    real3 q = affine_point(box.w2l0, box.w2l1, box.w2l2, p);
+    return ABS(q.x) <= REAL(0.5f) && ABS(q.y) <= REAL(0.5f) && ABS(q.z) <= REAL(0.5f);
+}
+
 /* The active box at a point: the last row whose closed unit box contains it, -1 for none
- * (aberrations.containing_box; rows are sorted by priority, then entity). */
+ * (aberrations.containing_box; rows are sorted by priority, then entity). BOX_TREE: the boxes
+ * whose leaves (grown by SPACE_PAD of |p|) hold p, from the tree; else every box. */
 int containing_box(SCENE_DECL real3 p)
 {
     int found = -1;
+#if BOX_TREE
+    real3 pad = R3S(SPACE_PAD * max(REAL(1.0f), length(p)));
+    int stack_node[SPACE_STACK_SIZE];
+    int sp = 0;
+    int next = SETTINGS.space_roots.y;
+    bool more = true;
+    while (more) {
+        SpaceNode node = SPACE_NODE(next);
+        real3 lo = TO_REAL3(node.lo.xyz) - pad;
+        real3 hi = TO_REAL3(node.hi.xyz) + pad;
+        bool inside = p.x >= lo.x && p.y >= lo.y && p.z >= lo.z && p.x <= hi.x && p.y <= hi.y && p.z <= hi.z;
+        int first = AS_INT(node.lo.w);
+        if (inside && AS_INT(node.hi.w) == 0) {
+            /* Both children may hold p: the second waits on the stack (the host sizes it to the depth). */
+            if (sp < SPACE_STACK_SIZE) {
+                stack_node[sp] = first + 1;
+                sp += 1;
+            }
+            next = first;
+        } else {
+            if (inside && first > found && box_holds(SCENE_PASS first, p)) {
+                found = first;
+            }
+            more = sp > 0;
+            if (more) {
+                sp -= 1;
+                next = stack_node[sp];
+            }
+        }
+    }
+#else
     int count = SETTINGS.counts.y;
     for (int b = 0; b < count; ++b) {
-        Aberration box = ABERRATION(b);
-        real3 q = affine_point(box.w2l0, box.w2l1, box.w2l2, p);
-        if (ABS(q.x) <= REAL(0.5f) && ABS(q.y) <= REAL(0.5f) && ABS(q.z) <= REAL(0.5f)) {
+        if (box_holds(SCENE_PASS b, p)) {
             found = b;
         }
     }
+#endif
     return found;
 }
 
@@ -289,31 +406,45 @@ FORCE_INLINE Turn transition(SCENE_DECL int old, int next, real3 w, real3 r, rea
 /* --- portals (DESIGN.md section 7, docs/semantics.md rules 3 and 10; reference/portals.py) -------- */
 
 #if HAS_PORTALS
-/* The nearest linked portal quad the ray passes through with t_min < t (portals.nearest_portal_hits):
- * kind EVENT_PORTAL, t = REAL_MAX for none. The closed quad |x|, |y| <= 1 at z = 0, two-sided; a ray
- * parallel to its plane never hits; the portal being left (skip) and unlinked ones never count; ties
- * go to the lower row. */
-FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+/* Portal p as a candidate after best (portals.nearest_portal_hits): a linked quad, not skip, that the ray
+ * passes through with t_min < t. */
+FORCE_INLINE Event portal_quad(SCENE_DECL Event best, int p, real3 o, real3 r, real t_min, int skip)
 {
-    Event best = no_event();
-    int count = SETTINGS.counts.z;
-    for (int p = 0; p < count; ++p) {
-        Portal portal = PORTAL(p);
-        if (portal.meta.x >= 0 && p != skip) {
-            real3 a = affine_point(portal.w2l0, portal.w2l1, portal.w2l2, o);
-            real3 v = linear_vector(portal.w2l0, portal.w2l1, portal.w2l2, r);
-            if (v.z != REAL(0.0f)) {
-                real t = -a.z / v.z;
-                real x = a.x + t * v.x;
-                real y = a.y + t * v.y;
-                if (t > t_min && t < best.t && ABS(x) <= REAL(1.0f) && ABS(y) <= REAL(1.0f)) {
-                    best.t = t;
-                    best.kind = EVENT_PORTAL;
-                    best.row = p;
-                }
+    Portal portal = PORTAL(p);
+    if (portal.meta.x >= 0 && p != skip) {
+        real3 a = affine_point(portal.w2l0, portal.w2l1, portal.w2l2, o);
+        real3 v = linear_vector(portal.w2l0, portal.w2l1, portal.w2l2, r);
+        if (v.z != REAL(0.0f)) {
+            real t = -a.z / v.z;
+            real x = a.x + t * v.x;
+            real y = a.y + t * v.y;
+            if (t > t_min && earlier(t, p, best.t, best.row) && ABS(x) <= REAL(1.0f) && ABS(y) <= REAL(1.0f)) {
+                best.t = t;
+                best.kind = EVENT_PORTAL;
+                best.row = p;
             }
         }
     }
+    return best;
+}
+
+/* The nearest linked portal quad the ray passes through with t_min < t (portals.nearest_portal_hits):
+ * kind EVENT_PORTAL, t = REAL_MAX for none. The closed quad |x|, |y| <= 1 at z = 0, two-sided; a ray
+ * parallel to its plane never hits; the portal being left (skip) and unlinked ones never count; ties
+ * go to the lower row. PORTAL_TREE: the quads whose leaves the ray enters, from the tree; else all. */
+FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip)
+{
+    Event best = no_event();
+#if PORTAL_TREE
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.x)
+    best = portal_quad(SCENE_PASS best, leaf, o, r, t_min, skip);
+    SPACE_LEAVES_END
+#else
+    int count = SETTINGS.counts.z;
+    for (int p = 0; p < count; ++p) {
+        best = portal_quad(SCENE_PASS best, p, o, r, t_min, skip);
+    }
+#endif
     return best;
 }
 
