@@ -151,3 +151,17 @@ def test_a_frame_that_sees_no_portal_or_box_takes_the_euclidean_variant(backend_
         finally:
             scene.close()
             plain.close()
+
+
+@pytest.mark.parametrize("case", ["portals-300-in-view", "boxes-300-in-view"])
+def test_the_references_trees_give_its_loops_frames(monkeypatch, case):
+    """The reference tests each portal and box only with the rays (points) that can reach it: the frame is
+    the one of its loops over every row with every ray, to the bit."""
+    from backends.reference import space_tree
+    from backends.reference.backend import ReferenceBackend
+
+    frames = []
+    for tree_min in (space_tree.TREE_MIN, 10**9):
+        monkeypatch.setattr(space_tree, "TREE_MIN", tree_min)
+        frames.append(render_scene(ReferenceBackend(), CROWDED[case], (40, 30)))
+    same_frames(*frames)
