@@ -155,7 +155,10 @@ def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
 
 
 #: Above this many portals (boxes) the kernels find them through their tree (PORTAL_TREE, BOX_TREE), below
-#: it with a loop over all, which is as fast there (measured: scripts/space_scale.py).
+#: it with a loop over all, which is as fast there (measured: scripts/space_scale.py). The loops' iterations
+#: grow with the count at every event; llvmpipe ends every loop of an invocation after 65,535 iterations of
+#: them all together (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS), which 16 events over 4,400 portals used up: the
+#: trees' grow with the depth.
 PORTAL_TREE_MIN = 8
 BOX_TREE_MIN = 8
 

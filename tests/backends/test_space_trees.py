@@ -23,6 +23,7 @@ from components import Transform
 from engine.camera_view import scene_camera
 from engine.packing import ScenePacker
 from engine.scene import Scene
+from engine.settings import Settings
 
 TREES_AND_LOOPS = [
     pytest.param("glsl", "f32", id="glsl-f32"),
@@ -165,3 +166,26 @@ def test_the_references_trees_give_its_loops_frames(monkeypatch, case):
         monkeypatch.setattr(space_tree, "TREE_MIN", tree_min)
         frames.append(render_scene(ReferenceBackend(), CROWDED[case], (40, 30)))
     same_frames(*frames)
+
+
+def facing_among_many(pairs: int) -> Scene:
+    """Two large portals facing each other around the camera (every ray ends at the 16-event limit), among
+    ``pairs`` more linked pairs far away. Looping over every portal at every event, GLSL on llvmpipe ran out
+    of the driver's loop iterations (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS: 65,535 per invocation, every loop
+    of the shader together) from about 2,200 pairs, and its rays stopped after 7 events."""
+    scene = Scene("facing-among-many", settings=Settings(max_events=16, event_limit_color=(1.0, 0.0, 1.0)))
+    scene.add_portal_pair("a", "b", a={"scale": 50.0}, b={"position": (0.0, 0.0, 2.0), "scale": 50.0})
+    for k in range(pairs):
+        x, y = 1000.0 + 3.0 * (k % 50), 3.0 * (k // 50)
+        scene.add_portal_pair(f"x{k}", f"y{k}", a={"position": (x, y, 0.0)}, b={"position": (x, y, 500.0)})
+    scene.add_mesh("ball", "sphere", position=(0.0, 0.0, -3.0))
+    scene.set_camera((0.0, 0.0, 1.0), look_at=(0.0, 0.0, 0.0))
+    return scene
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), TREES_AND_LOOPS)
+def test_every_ray_takes_all_its_events_among_five_thousand_portals(backend_factory, backend_name, precision):
+    backend = backend_factory(backend_name, precision)
+    frame = render_scene(backend, lambda: facing_among_many(2500), (32, 24))
+    assert np.all(frame.events == 16)
+    assert np.all(frame.color[..., :3] == (255, 0, 255))
