@@ -28,7 +28,7 @@ def _box_solids(world_to_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.
     """Centres (n, 3), half-edge vectors (n, 3 edges, 3) and unit face normals (n, 3, 3) of packed boxes."""
     m = np.asarray(world_to_local, dtype=np.float64)
     linear = np.linalg.inv(m[:, :, :3])  # local -> world; columns are the box's edges
-    centre = -np.einsum("nij,nj->ni", linear, m[:, :, 3])
+    centre = -_dot(linear, m[:, None, :, 3])
     half = 0.5 * np.transpose(linear, (0, 2, 1))
     normals = m[:, :, :3] / np.linalg.norm(m[:, :, :3], axis=2, keepdims=True)
     return centre, half, normals
@@ -150,7 +150,7 @@ class BoxClearances:
             return self.full(world_to_local, bounds_min, bounds_max)
         moved_boxes = np.asarray(sorted(boxes), np.int64)
         moved_instances = np.asarray(sorted(instances), np.int64)
-        self._set_solids(world_to_local, bounds_min, bounds_max)
+        self._update_solids(world_to_local, bounds_min, bounds_max, moved_boxes, moved_instances)
         if not (self._good_boxes.all() and self._good_instances.all()):
             return self.full(world_to_local, bounds_min, bounds_max)
         touched: set[int] = set(moved_boxes.tolist())
@@ -202,6 +202,34 @@ class BoxClearances:
         self._good_instances = _usable(self._c2, self._h2, self._slack_i)
         self._max_slack_i = float(self._slack_i.max()) if len(self._slack_i) and self._good_instances.all() else 0.0
         self._max_slack = float(self._slack.max()) if len(self._slack) and self._good_boxes.all() else 0.0
+
+    def _update_solids(
+        self, world_to_local: np.ndarray, lo: np.ndarray, hi: np.ndarray, boxes: np.ndarray, instances: np.ndarray
+    ) -> None:
+        """The solids of the moved rows only (each row's values do not depend on the others')."""
+        with np.errstate(all="ignore"):
+            if boxes.size:
+                m = np.asarray(world_to_local[boxes], dtype=np.float64).reshape(-1, 3, 4)
+                centre, half, normals = _box_solids(m)
+                self._centre[boxes], self._half[boxes], self._normals[boxes] = centre, half, normals
+                self._slack[boxes] = _solid_slack(centre, half)
+                self._good_boxes[boxes] = _usable(centre, half, normals, self._slack[boxes])
+                if self._good_boxes.all():
+                    self._max_slack = max(self._max_slack, float(self._slack[boxes].max()))
+            if instances.size:
+                self._lo, self._hi = self._lo.copy(), self._hi.copy()
+                self._lo[instances] = np.asarray(lo, dtype=np.float64)[instances]
+                self._hi[instances] = np.asarray(hi, dtype=np.float64)[instances]
+                ilo, ihi = self._lo[instances], self._hi[instances]
+                self._c2[instances] = 0.5 * (ilo + ihi)
+                self._h2[instances] = np.einsum("mj,jk->mjk", 0.5 * (ihi - ilo), np.eye(3))
+                c2 = self._c2[instances]
+                self._slack_i[instances] = CLEARANCE_SLACK * (
+                    np.linalg.norm(c2, axis=1) + np.linalg.norm(ihi - ilo, axis=1)
+                )
+                self._good_instances[instances] = _usable(c2, self._h2[instances], self._slack_i[instances])
+                if self._good_instances.all():
+                    self._max_slack_i = max(self._max_slack_i, float(self._slack_i[instances].max()))
 
     def _box_bounds(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World bounds of box ``rows``: centre plus or minus the sum of the half edges' magnitudes."""
