@@ -1,8 +1,8 @@
 """Frame cost against the number of portals or aberration boxes, in view and out of view.
 
 An interleaved A/B in one process: a floor and 30 boxes in view, with N portals (N / 2 linked pairs) or N
-metric boxes added out of view (behind the camera) or in view (a grid in front of the boxes), against the
-same scene without them; samples of a few frames of the two alternate on two backends of one kind, and the
+metric boxes added out of view (behind the camera), in view (a grid in front of the boxes) or hidden (in
+the camera's pyramid, behind a wall), against the same scene without them; samples of a few frames of the two alternate on two backends of one kind, and the
 cost is the median of the paired ratios of CPU time (the process's, every driver thread included: on a
 shared machine less noisy than wall time, which is reported too). Also checks that an out-of-view set
 leaves the image as it was.
@@ -49,22 +49,30 @@ def base_scene(name: str) -> Scene:
     return scene
 
 
-def grid(n: int, in_view: bool) -> list[tuple[float, float, float]]:
-    """n places: a wall of cells in front of the boxes (in view) or behind the camera (out of view)."""
+#: Where the N portals or boxes go: a wall of cells in front of the boxes ("in"), behind the camera ("out"),
+#: or in view but behind a wall that hides them ("hidden": the camera's pyramid holds them, no ray reaches them).
+VIEWS = ("in", "out", "hidden")
+
+
+def grid(n: int, view: str) -> list[tuple[float, float, float]]:
+    """n places for the view."""
     side = max(1, int(np.ceil(np.sqrt(n))))
     cell = 10.0 / side
     places = []
     for k in range(n):
         i, j = k % side, k // side
         x, y = -5.0 + (i + 0.5) * cell, 0.2 + (j + 0.5) * cell * 0.6
-        places.append((x, y, 1.5) if in_view else (x, y + 2.0, 14.0 + 0.01 * k))
+        z = {"in": 1.5, "out": 14.0 + 0.01 * k, "hidden": -14.0 - 0.01 * k}[view]
+        places.append((x, y + (2.0 if view == "out" else 0.0), z))
     return places
 
 
-def space_scene(kind: str, n: int, in_view: bool) -> Scene:
+def space_scene(kind: str, n: int, view: str) -> Scene:
     """The base scene with n portals (linked in pairs) or n metric boxes."""
-    scene = base_scene(f"{kind}-{n}-{'in' if in_view else 'out'}")
-    places = grid(n, in_view)
+    scene = base_scene(f"{kind}-{n}-{view}")
+    if view == "hidden":
+        scene.add_mesh("wall", "box", position=(0.0, 5.0, -10.0), scale=(80.0, 12.0, 0.5))
+    places = grid(n, view)
     side = max(1, int(np.ceil(np.sqrt(n))))
     size = 0.3 * 10.0 / side
     if kind == "portals":
@@ -132,7 +140,7 @@ def main() -> int:
     parser.add_argument("--backends", nargs="+", default=["opencl", "glsl"])
     parser.add_argument("--precision", default="f32")
     parser.add_argument("--kinds", nargs="+", default=["portals", "boxes"])
-    parser.add_argument("--views", nargs="+", default=["out", "in"])
+    parser.add_argument("--views", nargs="+", default=list(VIEWS), choices=VIEWS)
     parser.add_argument("--counts", nargs="+", type=int, default=[0, 4, 16, 64, 256, 1024])
     parser.add_argument("--size", type=int, default=320)
     parser.add_argument("--pairs", type=int, default=15)
@@ -146,7 +154,7 @@ def main() -> int:
         for kind in args.kinds:
             for view in args.views:
                 for n in args.counts:
-                    scene, plain = space_scene(kind, n, view == "in"), base_scene("plain")
+                    scene, plain = space_scene(kind, n, view), space_scene(kind, 0, view)
                     try:
                         row = {"backend": name, "kind": kind, "view": view, "n": n}
                         row.update(paired(name, args.precision, scene, plain, size, args.pairs, extra))

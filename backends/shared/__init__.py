@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from importlib import resources
+from typing import ClassVar
 
 import numpy as np
 
@@ -154,13 +155,10 @@ def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
     return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)
 
 
-#: Above this many portals (boxes) the kernels find them through their tree (PORTAL_TREE, BOX_TREE), below
-#: it with a loop over all, which is as fast there (measured: scripts/space_scale.py). The loops' iterations
-#: grow with the count at every event; llvmpipe ends every loop of an invocation after 65,535 iterations of
-#: them all together (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS), which 16 events over 4,400 portals used up: the
-#: trees' grow with the depth.
-PORTAL_TREE_MIN = 8
-BOX_TREE_MIN = 8
+#: The loops' iterations grow with the portal and box counts at every event; llvmpipe ends every loop of a
+#: shader invocation after 65,535 iterations of them all together (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS),
+#: which 16 events over 4,400 portals used up. The trees' grow with their depth: each backend loops only
+#: below a few (UploadedScene.tree_min).
 
 
 def tree_depth(nodes: np.ndarray, root: int) -> int:
@@ -175,12 +173,13 @@ def tree_depth(nodes: np.ndarray, root: int) -> int:
     return depth
 
 
-def space_defines(packed: PackedScene) -> dict[str, int]:
-    """PORTAL_TREE, BOX_TREE and SPACE_STACK_SIZE for a packed scene: a tree where there are enough portals or
-    boxes to pay for it, a stack as deep as the deeper tree (rounded up to 8, so few variants exist)."""
+def space_defines(packed: PackedScene, tree_min: tuple[int, int]) -> dict[str, int]:
+    """PORTAL_TREE, BOX_TREE and SPACE_STACK_SIZE for a packed scene: a tree where there are more portals or
+    boxes than ``tree_min`` says pay for it, a stack as deep as the deeper tree (rounded up to 8, so few
+    variants exist)."""
     portals, boxes = packed.counts.get("portals", 0), packed.counts.get("aberrations", 0)
     nodes, roots = packed.tables["space_nodes"], packed.tables["settings"]["space_roots"][0]
-    use_portals, use_boxes = portals > PORTAL_TREE_MIN, boxes > BOX_TREE_MIN
+    use_portals, use_boxes = portals > tree_min[0], boxes > tree_min[1]
     depth = max(
         tree_depth(nodes, int(roots[0])) if use_portals else 0, tree_depth(nodes, int(roots[1])) if use_boxes else 0
     )
@@ -198,6 +197,10 @@ MIN_SPACE_STACK = 16
 class UploadedScene:
     """Mixin of the fast backends: what they keep of their last upload. The tree defines, stack sizes
     and features pick the kernel variant; origin, boxes and instance bounds pack the camera row."""
+
+    #: Above this many portals, and boxes, the kernels find them through their trees, below it with loops
+    #: (where those are as fast: each backend's own, from scripts/space_scale.py A/Bs).
+    tree_min: ClassVar[tuple[int, int]] = (8, 4)
 
     def _forget_upload(self) -> None:
         self._counts: dict[str, int] = {}
@@ -220,7 +223,7 @@ class UploadedScene:
         if "tlas_nodes" in rewritten:
             self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
         if rewritten & {"space_nodes", "portals", "aberrations"}:
-            self._space = space_defines(packed)
+            self._space = space_defines(packed, self.tree_min)
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
