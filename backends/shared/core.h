@@ -58,8 +58,9 @@
  *                      host sets them above a few portals / boxes, where the tree is faster
  *   SPACE_STACK_SIZE   their traversal stack; the host sizes it to the deeper tree's depth
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
- *                      the camera row's lens.z); FACE_NEXT_BOX 1: the box after a face of a box alone
- *                      (rot1.w) from the face, not the loop (engine/box_clearance.py); 0 for A/B only
+ *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
+ *                      box after a face of a box alone (rot1.w) from the face, not the loop
+ *                      (engine/box_clearance.py); 0 for A/B only
  *
  * Entry point (journey.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -120,6 +121,9 @@
 #endif
 #ifndef FACE_NEXT_BOX
 #define FACE_NEXT_BOX 1
+#endif
+#ifndef CAMERA_CLEAR_SEARCH
+#define CAMERA_CLEAR_SEARCH 1
 #endif
 #ifndef HAS_RADIAL
 #define HAS_RADIAL 0
