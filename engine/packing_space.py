@@ -18,7 +18,7 @@ import numpy as np
 from components import Aberration, Portal, Transform
 from engine import layout
 from engine.affine_batch import compose_affine, transform_arrays, trs_forward, trs_inverse_batch
-from engine.box_clearance import BoxClearances
+from engine.clearances import BoxClearances
 from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene

@@ -38,6 +38,8 @@ TRACER_FILES: tuple[str, ...] = (
     "instances.h",
     "shade.h",
     "space.h",
+    "boxes.h",
+    "portals.h",
     "journey.h",
 )
 

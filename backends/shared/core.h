@@ -7,7 +7,9 @@
  *   bvh_wide.h    an instance's 4- or 8-wide tree
  *   instances.h   the nearest mesh hit: the tree over instances, then each instance's tree
  *   shade.h       the colour of a hit
- *   space.h       aberration boxes and portals: faces, transitions, teleports
+ *   space.h       what boxes and portals share: vector rules, the tie rule, their trees (space_nodes)
+ *   boxes.h       aberration boxes: faces, the box holding a point, transitions
+ *   portals.h     portals: the nearest quad, teleports
  *   journey.h     primary rays and the event loop: trace_pixel, the kernels' entry point
  *
  * Written once in the common subset of GLSL 4.30 and OpenCL C 1.2, so the two

@@ -13,8 +13,9 @@ from scenes import crowded
 
 from components import Aberration, Transform
 from engine.affine_batch import rotation_batch, trs_inverse_batch
-from engine.box_clearance import CLEARANCE_SLACK, BoxClearances, _box_solids, _separation, box_clearances
+from engine.box_clearance import CLEARANCE_SLACK, box_solids, separation
 from engine.camera_view import CAMERA_BOX_PER_RAY, camera_box
+from engine.clearances import BoxClearances, box_clearances
 from engine.packed import TableUpdate
 from engine.packing import ScenePacker
 from engine.scene import Scene
@@ -28,7 +29,7 @@ def brute_clearances(world_to_local: np.ndarray, lo: np.ndarray, hi: np.ndarray)
     n = len(world_to_local)
     if n == 0:
         return np.zeros(0), np.zeros(0)
-    centre, half, normals = _box_solids(world_to_local)
+    centre, half, normals = box_solids(world_to_local)
     slack = CLEARANCE_SLACK * (1.0 + np.linalg.norm(centre, axis=1) + 2.0 * np.linalg.norm(half, axis=(1, 2)))
     instance = np.full(n, 1e30)
     if len(lo):
@@ -37,14 +38,14 @@ def brute_clearances(world_to_local: np.ndarray, lo: np.ndarray, hi: np.ndarray)
         for b in range(n):
             world = np.broadcast_to(np.eye(3), (len(lo), 3, 3))
             axes = np.concatenate([np.broadcast_to(normals[b], (len(lo), 3, 3)), world], axis=1)
-            gap = _separation(centre[b], half[b], c2, h2, axes) - slack_i
+            gap = separation(centre[b], half[b], c2, h2, axes) - slack_i
             instance[b] = gap.min() if np.isfinite(gap).all() else 0.0
     boxes = np.full(n, 1e30)
     for b in range(n):
         for c in range(n):
             if c != b:
                 axes = np.concatenate([normals[b], normals[c]], axis=0)
-                gap = float(_separation(centre[b], half[b], centre[c], half[c], axes)) - slack[c]
+                gap = float(separation(centre[b], half[b], centre[c], half[c], axes)) - slack[c]
                 boxes[b] = min(boxes[b], gap if np.isfinite(gap) else 0.0)
     instance = np.where(np.isfinite(instance), instance - slack, 0.0)
     boxes = np.where(np.isfinite(boxes), boxes - slack, 0.0)
