@@ -18,6 +18,7 @@ from engine.camera_view import CAMERA_BOX_PER_RAY, camera_box
 from engine.clearances import BoxClearances, box_clearances
 from engine.packed import TableUpdate
 from engine.packing import ScenePacker
+from engine.packing_space import BOX_CORNERS, QUAD_CORNERS, corner_bounds
 from engine.scene import Scene
 from engine.tlas import AabbTree
 
@@ -205,4 +206,30 @@ def test_the_camera_box_through_the_tree_is_the_loops(seed):
         p = rng.uniform([-4.0, 0.2, -7.0], [4.0, 3.0, 0.5]) - packed.origin
         loop, fast = camera_box(p, rows), camera_box(p, rows, tree)
         assert fast == loop or loop == CAMERA_BOX_PER_RAY
+    scene.close()
+
+
+@pytest.mark.parametrize("kind", ["portals", "boxes"])
+def test_an_origin_shift_repacks_the_rows_and_moves_the_trees(kind):
+    """The camera leaves its cell: every portal and box row is packed anew around the new origin (a fresh
+    packer's bytes), and the trees still hold every quad and box."""
+    scene = crowded(kind, 60, seed=13)
+    packer = ScenePacker("f32", origin_cell=4.0)
+    packer.sync(scene)
+    camera = scene.camera_entity
+    t = scene.get(camera, Transform)
+    scene.set(camera, replace(t, position=(9.0, 1.8, 6.0)))
+    updates = packer.sync(scene)
+    table = "portals" if kind == "portals" else "aberrations"
+    assert TableUpdate(table) in updates and TableUpdate("space_nodes") in updates
+    fresh = ScenePacker("f32", origin_cell=4.0)
+    fresh.sync(scene)
+    assert np.array_equal(packer.packed.origin, fresh.packed.origin)
+    assert packer.packed.tables[table].tobytes() == fresh.packed.tables[table].tobytes()
+    tree = packer.space.portal_tree if kind == "portals" else packer.space.box_tree
+    rows = packer.packed.tables[table]["world_to_local"][: packer.packed.counts[table]].astype(np.float64)
+    linear = np.linalg.inv(rows[:, :, :3])
+    forward = np.concatenate([linear, -np.einsum("nij,nj->ni", linear, rows[:, :, 3])[:, :, None]], axis=2)
+    lo, hi = corner_bounds(forward, QUAD_CORNERS if kind == "portals" else BOX_CORNERS)
+    assert np.all(tree.fat_lo <= lo + 1e-5) and np.all(tree.fat_hi >= hi - 1e-5)
     scene.close()
