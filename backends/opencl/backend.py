@@ -372,7 +372,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
     # --- programs -----------------------------------------------------------------------
 
     def _defines(self, features: Features | None = None) -> dict[str, int]:
-        defines: dict[str, int] = dict((features or self._features).defines())
+        features = features or self._features
+        defines: dict[str, int] = dict(features.defines())
         defines.update(
             REAL_IS_DOUBLE=int(self.precision == "f64"),
             # Double helpers of the float tracer, only with fp64. Exact signs for edge functions that are
@@ -381,11 +382,11 @@ class OpenClBackend(shared.UploadedScene, Backend):
             # (PoCL 3.1, 800x800 ten boxes / 10k / 200k triangles): GPUs only, as the GLSL backend does.
             EDGE_FALLBACK_FP64=int(self.fp64 and not self.device.type & self._cl.device_type.CPU),
             WORLD_FP64=int(self.fp64),
-            # The first leg's search skipped within the camera's clearance: on PoCL the test costs more than
-            # it saves (interleaved A/B, 400x400 / 320x320, CPU time: ten-boxes-portals -5 %, 64 portals in
-            # view behind a wall -11 %, ten-boxes-aberration +2 %); GLSL keeps it (it saves 4 % and 3 % on the
-            # two bench scenes and costs 1.5 % behind the wall).
-            CAMERA_CLEAR_SEARCH=0,
+            # The first leg's search skipped within the camera's clearance: with portals alone PoCL's code for
+            # the test costs more than it saves (interleaved A/B, CPU time: 64 portals in view behind a wall
+            # -11 %, ten-boxes-portals -5 %), with boxes it gains (64 and 1,024 boxes behind a wall +7-9 %,
+            # ten-boxes-aberration +2 %).
+            CAMERA_CLEAR_SEARCH=int(bool(features.aberration_modes)),
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
             **self._space,

@@ -39,7 +39,10 @@ class SpaceTree:
         if len(world_to_local) <= TREE_MIN:
             return None
         with np.errstate(all="ignore"):
-            linear = np.linalg.inv(world_to_local[:, :, :3])
+            try:
+                linear = np.linalg.inv(world_to_local[:, :, :3])
+            except np.linalg.LinAlgError:
+                return None
             centre = -np.einsum("nij,nj->ni", linear, world_to_local[:, :, 3])
             world = np.einsum("nij,kj->nki", linear, corners) + centre[:, None, :]
         lo, hi = world.min(axis=1), world.max(axis=1)
