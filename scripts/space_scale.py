@@ -2,10 +2,10 @@
 
 An interleaved A/B in one process: a floor and 30 boxes in view, with N portals (N / 2 linked pairs) or N
 metric boxes added out of view (behind the camera), in view (a grid in front of the boxes) or hidden (in
-the camera's pyramid, behind a wall), against the same scene without them; samples of a few frames of the two alternate on two backends of one kind, and the
-cost is the median of the paired ratios of CPU time (the process's, every driver thread included: on a
-shared machine less noisy than wall time, which is reported too). Also checks that an out-of-view set
-leaves the image as it was.
+the camera's pyramid, behind a wall), against the same scene without them; samples of a few frames of the
+two alternate on two backends of one kind, and the cost is the median of the paired ratios of CPU time
+(the process's, every driver thread included: on a shared machine less noisy than wall time, which is
+reported too). Also checks that an out-of-view set leaves the image as it was.
 
     python scripts/space_scale.py --backends opencl glsl --counts 0 4 16 64 256 1024 --pairs 15
 """
