@@ -4,7 +4,8 @@ The kernels use both to skip work that provably finds nothing: a mesh search alo
 whose clearance exceeds the segment's reach past the box (the tie window), and the ``containing_box`` loop
 after a face of a box whose gap to every other box exceeds the nudge. Both are lower bounds on the world
 distance (separating-axis test on the face normals of the two solids, less a rounding slack), so a value
-that is too small only costs speed; a value that is too large would be a bug, hence the slack.
+that is too small only costs speed; a value that is too large would be a bug, hence the slack. Here: the
+geometry of the pairs and the camera's clearance; the boxes' values are found in :mod:`engine.clearances`.
 """
 
 from __future__ import annotations
@@ -21,63 +22,40 @@ if TYPE_CHECKING:
 CLEARANCE_SLACK = 1e-4
 
 
-def _box_solids(world_to_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def box_solids(world_to_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centres (n, 3), half-edge vectors (n, 3 edges, 3) and unit face normals (n, 3, 3) of packed boxes."""
     m = np.asarray(world_to_local, dtype=np.float64)
     linear = np.linalg.inv(m[:, :, :3])  # local -> world; columns are the box's edges
-    centre = -np.einsum("nij,nj->ni", linear, m[:, :, 3])
+    centre = -dot(linear, m[:, None, :, 3])
     half = 0.5 * np.transpose(linear, (0, 2, 1))
     normals = m[:, :, :3] / np.linalg.norm(m[:, :, :3], axis=2, keepdims=True)
     return centre, half, normals
 
 
-def _separation(c1: np.ndarray, h1: np.ndarray, c2: np.ndarray, h2: np.ndarray, axes: np.ndarray) -> np.ndarray:
+def separation(c1: np.ndarray, h1: np.ndarray, c2: np.ndarray, h2: np.ndarray, axes: np.ndarray) -> np.ndarray:
     """The largest gap between two solids along any of ``axes`` (a lower bound on their distance; <= 0 when
     no axis separates them). Shapes broadcast: centres (..., 3), half edges (..., 3, 3), axes (..., k, 3)."""
-    along = np.abs(np.einsum("...kj,...j->...k", axes, c2 - c1))
-    r1 = np.abs(np.einsum("...kj,...ej->...ke", axes, h1)).sum(axis=-1)
-    r2 = np.abs(np.einsum("...kj,...ej->...ke", axes, h2)).sum(axis=-1)
+    along = np.abs(dot(axes, (c2 - c1)[..., None, :]))
+    r1 = abs_sum(dot(axes[..., :, None, :], h1[..., None, :, :]))
+    r2 = abs_sum(dot(axes[..., :, None, :], h2[..., None, :, :]))
     return (along - r1 - r2).max(axis=-1)
 
 
-def box_clearances(
-    world_to_local: np.ndarray, bounds_min: np.ndarray, bounds_max: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per box: (world distance to the nearest instance's bounds, to the nearest other box), lower bounds
-    less the rounding slack, never negative; +inf-free (a scene without instances or other boxes gets 1e30).
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products over the last axis (3), summed left to right whatever the shapes and memory layout (the
+    same bits for a pair alone or among many; np.einsum's order depends on both)."""
+    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
 
-    ``world_to_local`` (n, 3, 4) are the packed rows (camera-relative), ``bounds_*`` (m, 3) the instances'
-    world bounds as packed (camera-relative too: distances do not depend on the origin).
-    """
-    n = len(world_to_local)
-    if n == 0:
-        return np.zeros(0), np.zeros(0)
-    centre, half, normals = _box_solids(world_to_local)
-    slack = CLEARANCE_SLACK * (1.0 + np.linalg.norm(centre, axis=1) + 2.0 * np.linalg.norm(half, axis=(1, 2)))
-    far = 1e30
-    instance = np.full(n, far)
-    lo = np.asarray(bounds_min, dtype=np.float64)
-    hi = np.asarray(bounds_max, dtype=np.float64)
-    if len(lo):
-        c2 = 0.5 * (lo + hi)
-        h2 = np.einsum("mj,jk->mjk", 0.5 * (hi - lo), np.eye(3))
-        world = np.broadcast_to(np.eye(3), (len(lo), 3, 3))
-        slack_i = CLEARANCE_SLACK * (np.linalg.norm(c2, axis=1) + np.linalg.norm(hi - lo, axis=1))
-        for b in range(n):
-            axes = np.concatenate([np.broadcast_to(normals[b], (len(lo), 3, 3)), world], axis=1)
-            gap = _separation(centre[b], half[b], c2, h2, axes) - slack_i
-            finite = np.isfinite(gap)
-            instance[b] = gap.min() if finite.all() else 0.0
-    boxes = np.full(n, far)
-    for b in range(n):
-        for c in range(n):
-            if c != b:
-                axes = np.concatenate([normals[b], normals[c]], axis=0)
-                gap = float(_separation(centre[b], half[b], centre[c], half[c], axes)) - slack[c]
-                boxes[b] = min(boxes[b], gap if np.isfinite(gap) else 0.0)
-    instance = np.where(np.isfinite(instance), instance - slack, 0.0)
-    boxes = np.where(np.isfinite(boxes), boxes - slack, 0.0)
-    return np.maximum(instance, 0.0), np.maximum(boxes, 0.0)
+
+def abs_sum(v: np.ndarray) -> np.ndarray:
+    """|v_0| + |v_1| + |v_2| over the last axis, left to right."""
+    a = np.abs(v)
+    return (a[..., 0] + a[..., 1]) + a[..., 2]
+
+
+def solid_slack(centre: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Each box's rounding slack: CLEARANCE_SLACK of the size of its terms."""
+    return CLEARANCE_SLACK * (1.0 + np.linalg.norm(centre, axis=1) + 2.0 * np.linalg.norm(half, axis=(1, 2)))
 
 
 #: Above this many instances the camera's clearance is not computed (0: every first search runs); the

@@ -17,6 +17,7 @@ from engine.box_clearance import camera_clearance
 from engine.layout import Precision
 from engine.maths import quat_to_matrix
 from engine.scene import Scene
+from engine.tlas import rows_at
 
 
 @dataclass(frozen=True)
@@ -74,21 +75,24 @@ CAMERA_FACE_MARGIN = 1e-3
 CAMERA_BOX_PER_RAY = -2
 
 
-def camera_box(position: np.ndarray, aberrations: np.ndarray | None) -> int:
+def camera_box(position: np.ndarray, aberrations: np.ndarray | None, tree: tuple[np.ndarray, int] | None = None) -> int:
     """The active box of every primary ray, or CAMERA_BOX_PER_RAY when rays may disagree.
 
     ``position`` is camera-relative, ``aberrations`` the packed rows in use (rule 5: the last row containing
     the point). Each ray looks its box up just past the camera along its own direction; that is the same
     box for all rays when the camera is further than the nudge (plus the kernel's rounding) from every face,
     which this demands with a wide margin. Near a face (a camera standing on one, touching boxes) each ray
-    keeps its own look-up.
+    keeps its own look-up. ``tree``: the ``space_nodes`` table and the boxes' root; then only the boxes
+    whose leaves hold the camera (grown by the margin) are looked at, as only they can hold a ray's point.
     """
     if aberrations is None:
         return CAMERA_BOX_PER_RAY
     p = np.asarray(position, dtype=np.float64)
     size = max(1.0, float(np.linalg.norm(p)))
     found = -1
-    for b, row in enumerate(aberrations):
+    candidates = range(len(aberrations)) if tree is None else rows_at(*tree, p, CAMERA_FACE_MARGIN * size)
+    for b in candidates:
+        row = aberrations[b]
         m = np.asarray(row["world_to_local"], dtype=np.float64)
         q = m[:, :3] @ p + m[:, 3]
         # Local units per world unit along each axis, and the size of the terms q is computed from.
@@ -102,6 +106,49 @@ def camera_box(position: np.ndarray, aberrations: np.ndarray | None) -> int:
     return found
 
 
+#: A box counts as seen when it is within this angle (radians, about) of the corner rays' pyramid: far above
+#: the rounding of the kernels' primary rays.
+VIEW_MARGIN = 1e-4
+
+
+def view_planes(view: CameraView, aspect: float) -> np.ndarray:
+    """Unit inward normals (4, 3) of the pyramid of the corner rays: every primary ray is inside it."""
+    t = math.tan(math.radians(view.fov_deg) / 2.0)
+    local = np.array([[-aspect * t, -t, -1.0], [aspect * t, -t, -1.0], [aspect * t, t, -1.0], [-aspect * t, t, -1.0]])
+    corners = local @ view.rotation.T
+    normals = np.cross(corners, np.roll(corners, -1, axis=0))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    forward = -view.rotation[:, 2]
+    return np.where((normals @ forward)[:, None] < 0.0, -normals, normals)
+
+
+def _box_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Whether the box lo/hi is not wholly outside one of the pyramid's planes (apex: the camera)."""
+    # The box's corner furthest along each normal, relative to the apex.
+    far = np.where(planes > 0.0, hi, lo) - apex
+    reach = float(np.max(np.abs(np.concatenate([lo - apex, hi - apex]))))
+    return bool(np.all(np.einsum("pk,pk->p", planes, far) >= -VIEW_MARGIN * max(1.0, reach)))
+
+
+def view_reaches(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.ndarray, root: int) -> bool:
+    """Whether a primary ray can meet a leaf of the tree in ``nodes`` from ``root`` (camera-relative bounds,
+    ``origin`` the packed origin): a leaf's box meets the pyramid of the corner rays. False proves that
+    every primary ray misses every portal quad or box the tree holds."""
+    apex = np.asarray(view.position, dtype=np.float64) - origin
+    planes = view_planes(view, aspect)
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        lo, hi = nodes["bounds_min"][node].astype(np.float64), nodes["bounds_max"][node].astype(np.float64)
+        if not _box_seen(planes, apex, lo, hi):
+            continue
+        if nodes["count"][node] > 0:
+            return True
+        first = int(nodes["first"][node])
+        stack += [first, first + 1]
+    return False
+
+
 def pack_camera(
     view: CameraView,
     origin: np.ndarray,
@@ -110,12 +157,14 @@ def pack_camera(
     height: int,
     aberrations: np.ndarray | None = None,
     bounds: tuple[np.ndarray, np.ndarray] | None = None,
+    tree: tuple[np.ndarray, int] | None = None,
 ) -> np.ndarray:
     """One row of the camera table, relative to the packed origin.
 
     ``aberrations``: the packed rows in use, for the camera's box (``size.z``, camera_box); without them
     every ray looks its box up. ``bounds``: the instances' packed bounds, for the camera's clearance
-    (``lens.z``, box_clearance.camera_clearance); without them every first mesh search runs.
+    (``lens.z``, box_clearance.camera_clearance); without them every first mesh search runs. ``tree``: the
+    ``space_nodes`` table and the boxes' root, to find the camera's box among many (camera_box).
     """
     row = np.zeros(1, dtype=layout.camera_dtype(precision))
     aspect = width / height
@@ -132,5 +181,5 @@ def pack_camera(
         aspect,
         camera_clearance(view.position - origin, bounds),
     )
-    row["size"][0, :3] = (width, height, camera_box(view.position - origin, aberrations))
+    row["size"][0, :3] = (width, height, camera_box(view.position - origin, aberrations, tree))
     return row

@@ -13,7 +13,7 @@ the std430 rules, and that the written structs read the dtypes' bytes.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``):
+  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``, ``space_nodes``):
   always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
   may traverse them. ``bvh_nodes`` has one of four dtypes, chosen by the
@@ -218,6 +218,14 @@ def bvh_compact(nodes: np.ndarray) -> bool:
 TLAS_NODE = Record("TlasNode", BVH_NODE.fields)
 TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 
+#: A node of the trees over portal quads and aberration boxes (``engine.packing_space``), the BVH node's 32
+#: bytes, as :data:`TLAS_NODE_DTYPE`: ``count == 1``, a leaf over portal or aberration row ``first``;
+#: ``count == 0``, an interior node whose children are ``first`` and ``first + 1``. One table holds both
+#: trees, the portals' from row 0, the boxes' from the settings' ``space_roots.y``. A leaf's bounds hold its
+#: quad's or box's world bounds, grown by a margin and by :data:`engine.tlas.SPACE_SLACK` of their size.
+SPACE_NODE = Record("SpaceNode", BVH_NODE.fields)
+SPACE_NODE_DTYPE = BVH_NODE_DTYPE
+
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
 #: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
 MATERIAL = Record("Material", (Field("color", "float4"), Field("flags", "int4")))
@@ -225,10 +233,15 @@ MATERIAL_DTYPE = MATERIAL.dtype()
 
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
 #: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
-#: aberrations, portals, max_events)``.
+#: aberrations, portals, max_events)``; ``space_roots = (portal tree root, box tree root, 0, 0)``,
+#: rows of ``space_nodes``.
 SETTINGS = Record(
     "Settings",
-    (*_vectors("float4", "background", "light_dir", "event_limit_color", "shading"), Field("counts", "int4")),
+    (
+        *_vectors("float4", "background", "light_dir", "event_limit_color", "shading"),
+        Field("counts", "int4"),
+        Field("space_roots", "int4"),
+    ),
 )
 SETTINGS_DTYPE = SETTINGS.dtype()
 
@@ -325,6 +338,7 @@ RECORDS: tuple[Record, ...] = (
     ABERRATION,
     PORTAL,
     TLAS_NODE,
+    SPACE_NODE,
     CAMERA,
 )
 
@@ -357,6 +371,7 @@ TABLES: tuple[str, ...] = (
     "portals",
     "tlas_nodes",
     "triangle_blocks",
+    "space_nodes",
 )
 
 
@@ -370,6 +385,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "materials": MATERIAL_DTYPE,
         "tlas_nodes": TLAS_NODE_DTYPE,
         "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
+        "space_nodes": SPACE_NODE_DTYPE,
     }
     if name in fixed:
         return fixed[name]

@@ -18,10 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from components import Aberration, Mesh, Portal, Transform
+from components import Mesh, Transform
 from engine import layout
-from engine.affine_batch import compose_affine, transform_arrays, trs_forward, trs_inverse_batch
-from engine.box_clearance import box_clearances
+from engine.affine_batch import transform_arrays, trs_forward, trs_inverse_batch
 from engine.bvh import BvhParams
 from engine.bvh_cache import cached_bvh
 from engine.bvh_compact import compact, offset_compact
@@ -30,8 +29,9 @@ from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
 from engine.packed import Features, PackedScene, TableUpdate
+from engine.packing_space import SpaceTables
 from engine.scene import SETTINGS, Scene
-from engine.tlas import FAT_MARGIN, InstanceTlas
+from engine.tlas import FAT_MARGIN, AabbTree
 
 
 def _round_out(lo: np.ndarray, hi: np.ndarray, precision: Precision) -> tuple[np.ndarray, np.ndarray]:
@@ -95,7 +95,9 @@ class ScenePacker:
         self._asset_roots: dict[str, int] = {}
         self.tlas_margin = tlas_margin
         #: The top-level tree over the instance rows (``tlas_nodes``), kept in step with them.
-        self.tlas = InstanceTlas.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
+        self.tlas = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
+        #: The portal and aberration rows and the trees over them (``space_nodes``).
+        self.space = SpaceTables(precision)
 
     # origin ---------------------------------------------------------------------------
 
@@ -131,12 +133,13 @@ class ScenePacker:
             self.tlas.translate(delta, *self._instance_bounds())
             self._store_tlas()
             updates += [TableUpdate("instances"), TableUpdate("tlas_nodes")]
+            updates += self.space.translate(scene, packed, delta, self._instance_bounds())
             changes = [c for c in changes if c.kind not in ("transform",)]
-            changed_real = {"aberrations", "portals"}
-        else:
-            changed_real = set()
         instance_rows: set[int] = set()
         material_rows: set[int] = set()
+        portals: set[int] = set()
+        boxes: set[int] = set()
+        components = False
         for change in changes:
             if change.kind == SETTINGS:
                 self._pack_settings(scene)
@@ -148,38 +151,32 @@ class ScenePacker:
                 instance_rows.add(self._instance_row[change.entity])
                 if change.kind == "mesh":
                     material_rows.add(self._instance_row[change.entity])
-            if change.kind in ("transform", "aberration") and scene.has(change.entity, Aberration):
-                changed_real.add("aberrations")
-            if change.kind in ("transform", "portal", "name") and scene.has(change.entity, Portal):
-                changed_real.add("portals")
+            if change.kind in ("transform", "aberration") and change.entity in self.space.boxes.row:
+                boxes.add(change.entity)
+                components |= change.kind == "aberration"
+            if change.kind in ("transform", "portal", "name") and change.entity in self.space.portals.row:
+                portals.add(change.entity)
+                components |= change.kind == "portal"
         for row in sorted(instance_rows):
             self._pack_instance_rows(scene, [row])
             updates.append(TableUpdate("instances", range(row, row + 1)))
         if instance_rows:
             updates += self._update_tlas(sorted(instance_rows))
-            if packed.counts["aberrations"] and "aberrations" not in changed_real:
-                # The boxes' clearances to the instances: only the rows whose clearance changed.
-                old = packed.tables["aberrations"]
-                self._pack_aberrations(scene)
-                updates.extend(
-                    TableUpdate("aberrations", r) for r in _changed_ranges(old, packed.tables["aberrations"])
-                )
         for row in sorted(material_rows):
             self._pack_material_row(scene, row)
             updates.append(TableUpdate("materials", range(row, row + 1)))
-        for table in sorted(changed_real):
-            old = packed.tables[table]
-            (self._pack_aberrations if table == "aberrations" else self._pack_portals)(scene)
-            new = packed.tables[table]
-            if any(u.table == table and u.rows is None for u in updates):
-                continue
-            if len(old) != len(new):
-                updates.append(TableUpdate(table))
-            else:
-                updates.extend(TableUpdate(table, r) for r in _changed_ranges(old, new))
-        if any(t in changed_real for t in ("aberrations", "portals")):
+        if portals or boxes or instance_rows:
+            space = self.space.update(scene, packed, portals, boxes, self._instance_bounds(), sorted(instance_rows))
+            if space is None:  # a box's priority moved its row: the space tables anew
+                self.space.full(scene, packed, self._instance_bounds())
+                space = [TableUpdate(name) for name in ("portals", "aberrations", "space_nodes")]
+                components = True
+            updates += space
+        if components:
+            features = packed.features
             self._update_features_and_counts(scene)
-            updates.append(TableUpdate("settings"))
+            if packed.features != features:
+                updates.append(TableUpdate("settings"))
         updates = _merge(updates)
         for u in updates:
             packed.versions[u.table] = packed.versions.get(u.table, 0) + 1
@@ -254,11 +251,10 @@ class ScenePacker:
             versions={name: old_versions.get(name, 0) + 1 for name in layout.TABLES},
         )  # fmt: skip
         self._pack_instances(scene)
-        self.tlas = InstanceTlas.build(*self._instance_bounds(), self.tlas_margin)
+        self.tlas = AabbTree.build(*self._instance_bounds(), self.tlas_margin)
         self._store_tlas()
         self._pack_materials(scene)
-        self._pack_aberrations(scene)
-        self._pack_portals(scene)
+        self.space.full(scene, self.packed, self._instance_bounds())
         self._update_features_and_counts(scene)
 
     def _pack_settings(self, scene: Scene) -> None:
@@ -273,6 +269,7 @@ class ScenePacker:
         row["shading"][0, 0] = s.ambient
         c = self.packed.counts
         row["counts"][0] = (c["instances"], c["aberrations"], c["portals"], s.max_events)
+        row["space_roots"][0] = (0, self.space.box_root, 0, 0)
         self.packed.tables["settings"] = row
         self.packed.counts["settings"] = 1
         self.packed.features = Features(
@@ -281,9 +278,7 @@ class ScenePacker:
 
     def _update_features_and_counts(self, scene: Scene) -> None:
         assert self.packed is not None
-        modes = frozenset(a.mode for _, a in scene.query(Aberration))
-        portals = any(p.target is not None for _, p in scene.query(Portal))
-        self.packed.features = Features(portals, modes, scene.settings.max_events)
+        self.packed.features = Features(self.space.linked, self.space.modes, scene.settings.max_events)
         self._pack_settings(scene)
 
     def _pack_instances(self, scene: Scene) -> None:
@@ -356,56 +351,6 @@ class ScenePacker:
         table = self.packed.tables["materials"]
         table["color"][row] = (*mesh.color, mesh.checker)
         table["flags"][row] = (int(mesh.cull_backfaces), 0, 0, 0)
-
-    def _pack_aberrations(self, scene: Scene) -> None:
-        packed = self.packed
-        assert packed is not None
-        rows = sorted(scene.query(Transform, Aberration), key=lambda row: (row[1][1].priority, row[0]))
-        table = np.zeros(max(len(rows), 1), dtype=layout.aberration_dtype(self.precision))
-        packed.counts["aberrations"] = len(rows)
-        if rows:
-            p, r, s = transform_arrays([t for _, (t, _) in rows], packed.origin)
-            table["world_to_local"][: len(rows)] = trs_inverse_batch(p, r, s)
-            table["rotation"][: len(rows), :, :3] = r
-            # rotation[0].w: the box's clearance to every instance, rotation[1].w: its gap to every other box
-            # (world distances, lower bounds): the kernels skip the searches they prove empty (box_clearance).
-            instance, boxes = box_clearances(table["world_to_local"][: len(rows)], *self._instance_bounds())
-            table["rotation"][: len(rows), 0, 3] = instance
-            table["rotation"][: len(rows), 1, 3] = boxes
-            for i, (entity, (_, ab)) in enumerate(rows):
-                table["deformation"][i, :3] = ab.deformation
-                table["meta"][i] = (
-                    layout.ABERRATION_MODES[ab.mode],
-                    layout.ABERRATION_EXITS[ab.exit],
-                    ab.priority,
-                    entity,
-                )
-        packed.tables["aberrations"] = table
-
-    def _pack_portals(self, scene: Scene) -> None:
-        packed = self.packed
-        assert packed is not None
-        rows = scene.query(Transform, Portal)
-        row_of = {entity: i for i, (entity, _) in enumerate(rows)}
-        table = np.zeros(max(len(rows), 1), dtype=layout.portal_dtype(self.precision))
-        packed.counts["portals"] = len(rows)
-        if rows:
-            p, r, s = transform_arrays([t for _, (t, _) in rows], packed.origin)
-            forward, inverse = trs_forward(p, r, s), trs_inverse_batch(p, r, s)
-            table["world_to_local"][: len(rows)] = inverse
-            targets = np.array(
-                [-1 if portal.target is None else row_of[scene.entity(portal.target)] for _, (_, portal) in rows]
-            )
-            linked = np.flatnonzero(targets >= 0)
-            identity = np.zeros((len(rows), 3, 4))
-            identity[:, :, :3] = np.eye(3)
-            transfer = identity
-            if linked.size:
-                transfer[linked] = compose_affine(forward[targets[linked]], inverse[linked])
-            table["transfer"][: len(rows)] = transfer
-            for i, (entity, _) in enumerate(rows):
-                table["meta"][i] = (targets[i], entity, 0, 0)
-        packed.tables["portals"] = table
 
 
 def _merge(updates: list[TableUpdate]) -> list[TableUpdate]:

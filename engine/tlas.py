@@ -1,4 +1,6 @@
-"""The top-level BVH over instances (``tlas_nodes``): which instances a ray can reach, without a loop over all.
+"""Dynamic AABB trees: over instances (``tlas_nodes``), which instances a ray can reach, without a loop over
+all; over portal quads and aberration boxes (``space_nodes``, :mod:`engine.packing_space`), which of them a ray
+or a point can meet; and, in world space, the same for the camera's walk (:mod:`engine.space_index`).
 
 The kernels used to test every instance's world bounds for every search; a
 ray taking several events (aberration faces, portals) searched the meshes
@@ -21,10 +23,16 @@ instance set changes, the tree is rebuilt. Built with a full-sweep SAH over
 the fat boxes, so a floor that spans the scene ends up alone near the root.
 Node bounds are float32 rounded outward (and a parent's are the union of its
 children's stored bounds), so every precision may traverse them.
+
+A space tree's leaves stand for quads and boxes that the kernels test in their own
+local frames, with rounding of their own: its fat boxes are grown further by
+``slack`` times the size of their coordinates (:data:`SPACE_SLACK`), so a ray or a
+point that such a test accepts is always inside the leaf's box.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -38,6 +46,10 @@ FAT_MARGIN = 0.1
 SAH_MIN_ROWS = 16
 #: Rebuild instead of refitting when more than this fraction of the instances left their fat boxes at once.
 REBUILD_FRACTION = 0.125
+#: A space tree's fat boxes also grow by this fraction of (1 + their largest coordinate): far above the float32
+#: rounding of a portal's or a box's local coordinates (a few 1e-7 of their size), which the kernel's own
+#: per-ray padding (SPACE_PAD in backends/shared/core.h) complements for the ray's origin.
+SPACE_SLACK = 1e-5
 
 
 def _round_out(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -48,12 +60,18 @@ def _round_out(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo32, hi32
 
 
-def fatten(lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+def fatten(
+    lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN, slack: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Fat boxes (float64) of exact bounds ``lo``/``hi`` (n, 3): each axis grown by ``margin`` times its
     extent, or a tenth of the largest extent where the axis is thinner (a floor plane gets a thin fat box,
-    not one as tall as it is wide: a tall one would be entered by most rays)."""
+    not one as tall as it is wide: a tall one would be entered by most rays); and by ``slack`` times
+    (1 + the largest coordinate)."""
     extent = hi - lo
     grow = margin * np.maximum(extent, 0.1 * np.max(extent, axis=-1, keepdims=True))
+    if slack:
+        size = 1.0 + np.maximum(np.abs(lo), np.abs(hi)).max(axis=-1, keepdims=True)
+        grow = grow + slack * size
     return lo - grow, hi + grow
 
 
@@ -97,7 +115,7 @@ def _median_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 @dataclass
-class InstanceTlas:
+class AabbTree:
     """The packed node table and what an incremental update needs (host only)."""
 
     nodes: np.ndarray
@@ -108,6 +126,8 @@ class InstanceTlas:
     parent: np.ndarray
     leaf: np.ndarray
     margin: float = FAT_MARGIN
+    #: Growth of the fat boxes relative to their coordinates' size (space trees: :data:`SPACE_SLACK`).
+    slack: float = 0.0
     #: How many rebuilds and refits this tree has had (benchmarks report them).
     rebuilds: int = 0
     refits: int = 0
@@ -123,12 +143,13 @@ class InstanceTlas:
     # --- building ----------------------------------------------------------------------------
 
     @classmethod
-    def build(cls, lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN) -> InstanceTlas:
-        """A tree over instance rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0."""
+    def build(cls, lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN, slack: float = 0.0) -> AabbTree:
+        """A tree over rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0."""
         lo = np.asarray(lo, np.float64).reshape(-1, 3)
         hi = np.asarray(hi, np.float64).reshape(-1, 3)
-        fat_lo, fat_hi = fatten(lo, hi, margin)
-        tree = cls(np.zeros(1, TLAS_NODE_DTYPE), fat_lo, fat_hi, np.zeros(0, np.int64), np.zeros(0, np.int64), margin)
+        fat_lo, fat_hi = fatten(lo, hi, margin, slack)
+        empty = np.zeros(0, np.int64)
+        tree = cls(np.zeros(1, TLAS_NODE_DTYPE), fat_lo, fat_hi, empty, empty, margin, slack)
         tree._build()
         return tree
 
@@ -188,6 +209,11 @@ class InstanceTlas:
 
     # --- incremental updates -------------------------------------------------------------------
 
+    def _outside(self, rows: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Which of ``rows`` no longer fit their fat box with exact bounds ``lo``/``hi`` (grown by the slack)."""
+        lo, hi = fatten(lo, hi, 0.0, self.slack) if self.slack else (lo, hi)
+        return np.any(lo < self.fat_lo[rows], axis=1) | np.any(hi > self.fat_hi[rows], axis=1)
+
     def update(self, rows: np.ndarray | list[int], lo: np.ndarray, hi: np.ndarray) -> list[int] | None:
         """Instance ``rows`` now have exact bounds ``lo``/``hi`` (len(rows), 3).
 
@@ -197,11 +223,11 @@ class InstanceTlas:
         rows = np.asarray(rows, np.int64).reshape(-1)
         lo = np.asarray(lo, np.float64).reshape(-1, 3)
         hi = np.asarray(hi, np.float64).reshape(-1, 3)
-        out = np.any(lo < self.fat_lo[rows], axis=1) | np.any(hi > self.fat_hi[rows], axis=1)
+        out = self._outside(rows, lo, hi)
         if not np.any(out):
             return []
         escaped, lo, hi = rows[out], lo[out], hi[out]
-        self.fat_lo[escaped], self.fat_hi[escaped] = fatten(lo, hi, self.margin)
+        self.fat_lo[escaped], self.fat_hi[escaped] = fatten(lo, hi, self.margin, self.slack)
         if len(escaped) > max(1, int(REBUILD_FRACTION * len(self.leaf))):
             self._build()
             return None
@@ -232,7 +258,70 @@ class InstanceTlas:
         (rounding) are grown again."""
         self.fat_lo = self.fat_lo - delta
         self.fat_hi = self.fat_hi - delta
-        out = np.any(lo < self.fat_lo, axis=1) | np.any(hi > self.fat_hi, axis=1)
-        self.fat_lo[out], self.fat_hi[out] = fatten(lo[out], hi[out], self.margin)
+        out = self._outside(np.arange(len(self.fat_lo)), lo, hi)
+        self.fat_lo[out], self.fat_hi[out] = fatten(lo[out], hi[out], self.margin, self.slack)
         if len(self.leaf):
             self._refit_all()
+
+    # --- queries (host side) ---------------------------------------------------------------------
+
+    def rows_on_segment(self, start: np.ndarray, end: np.ndarray, pad: float = 0.0) -> list[int]:
+        """Rows whose fat box, grown by ``pad``, the segment from ``start`` to ``end`` meets (sorted)."""
+        if not len(self.leaf):
+            return []
+        a = np.asarray(start, np.float64)
+        d = np.asarray(end, np.float64) - a
+        seg_lo, seg_hi = np.minimum(a, a + d) - pad, np.maximum(a, a + d) + pad
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = 1.0 / d
+
+        def meets(lo: np.ndarray, hi: np.ndarray) -> bool:
+            if np.any(hi < seg_lo) or np.any(lo > seg_hi):
+                return False
+            lo, hi = lo - pad, hi + pad
+            t_in, t_out = 0.0, 1.0
+            for k in range(3):
+                if d[k] == 0.0:
+                    if a[k] < lo[k] or a[k] > hi[k]:
+                        return False
+                    continue
+                t0, t1 = (lo[k] - a[k]) * inv[k], (hi[k] - a[k]) * inv[k]
+                t_in, t_out = max(t_in, min(t0, t1)), min(t_out, max(t0, t1))
+            return t_in <= t_out * (1.0 + 1e-12) + 1e-12
+
+        return self._collect(meets)
+
+    def rows_at(self, point: np.ndarray, pad: float = 0.0) -> list[int]:
+        """Rows whose fat box, grown by ``pad``, holds ``point`` (sorted)."""
+        return rows_at(self.nodes, 0, point, pad) if len(self.leaf) else []
+
+    def rows_in_box(self, lo: np.ndarray, hi: np.ndarray) -> list[int]:
+        """Rows whose fat box overlaps the closed box ``lo``/``hi`` (sorted)."""
+        qlo, qhi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+        return self._collect(lambda nlo, nhi: bool(np.all(nlo <= qhi) and np.all(qlo <= nhi)))
+
+    def _collect(self, keep: Callable[[np.ndarray, np.ndarray], bool]) -> list[int]:
+        return collect(self.nodes, 0, keep) if len(self.leaf) else []
+
+
+def collect(nodes: np.ndarray, root: int, keep: Callable[[np.ndarray, np.ndarray], bool]) -> list[int]:
+    """The rows of every leaf of the tree in ``nodes`` from ``root`` reached through nodes whose (float64)
+    bounds ``keep`` accepts, sorted."""
+    found: list[int] = []
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if not keep(nodes["bounds_min"][node].astype(np.float64), nodes["bounds_max"][node].astype(np.float64)):
+            continue
+        first = int(nodes["first"][node])
+        if nodes["count"][node] > 0:
+            found.append(first)
+        else:
+            stack += [first, first + 1]
+    return sorted(found)
+
+
+def rows_at(nodes: np.ndarray, root: int, point: np.ndarray, pad: float = 0.0) -> list[int]:
+    """Rows whose leaf in the tree of ``nodes`` from ``root``, grown by ``pad``, holds ``point`` (sorted)."""
+    p = np.asarray(point, np.float64)
+    return collect(nodes, root, lambda lo, hi: bool(np.all(lo - pad <= p) and np.all(p <= hi + pad)))

@@ -16,6 +16,7 @@ from engine.errors import AberrantError
 from engine.input import InputSource, NoInput
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from engine.space_index import SpaceIndex
 from systems.camera_movement import SPRINT_MULTIPLIER, CameraMovementProcessor
 from systems.gpu_upload import GpuUploadProcessor
 from systems.portal_teleport import PortalTeleportProcessor
@@ -53,8 +54,12 @@ class App:
         self.upload_stats = UploadStats()
         self.frame_slot = FrameSlot()
         self.ticks = 0
-        self.movement = CameraMovementProcessor(scene, input_source or NoInput(), self.motion, sprint_multiplier)
-        self.teleport = PortalTeleportProcessor(scene, self.motion)
+        #: Where the portals and boxes are, for the camera's walk and teleport (one index for both).
+        self.space = SpaceIndex()
+        self.movement = CameraMovementProcessor(
+            scene, input_source or NoInput(), self.motion, sprint_multiplier, index=self.space
+        )
+        self.teleport = PortalTeleportProcessor(scene, self.motion, index=self.space)
         self.upload: GpuUploadProcessor | None = None
         self.render: RenderProcessor | None = None
         registered: list[tuple[esper.Processor, Priority]] = [

@@ -5,7 +5,9 @@ world displacement ``R (s ⊙ (Rᵀ v))·dt`` inside the aberration active at th
 camera (``s = 1 + D``), the same rule rays follow, so what you see is where
 you go. The walk is split into sub-steps at every box face it crosses, so a
 box thinner than one tick's step still scales exactly the part of the tick
-spent inside it.
+spent inside it. Each step looks only at the boxes whose bounds hold its point
+or meet its segment (:class:`SpeedBoxes`, through
+:class:`engine.space_index.SpaceIndex`).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from components import Aberration, Camera, Transform
 from engine.input import InputSource, InputState
 from engine.maths import ArrayLike, quat_from_axis_angle, quat_multiply, quat_normalize, quat_to_matrix, trs_inverse
 from engine.scene import Scene
+from engine.space_index import SpaceIndex
 from systems.state import MotionRecord
 
 #: Speed factor while the sprint input is held.
@@ -78,9 +81,49 @@ def speed_boxes(scene: Scene) -> list[SpeedBox]:
     return sorted(boxes, key=lambda b: (b.priority, b.entity))
 
 
-def active_box(boxes: Sequence[SpeedBox], point: np.ndarray) -> SpeedBox | None:
+class SpeedBoxes:
+    """The scene's speed boxes near a point or a segment: those whose bounds hold or meet it (a
+    :class:`engine.space_index.SpaceIndex` query), lowest precedence first as :func:`speed_boxes` has them.
+    A box's speed rule is made again only when its entity changed."""
+
+    def __init__(self, scene: Scene, index: SpaceIndex | None = None) -> None:
+        self.scene = scene
+        self.index = index or SpaceIndex()
+        self._boxes: dict[int, tuple[object, SpeedBox]] = {}
+
+    def sync(self) -> SpeedBoxes:
+        self.index.sync(self.scene)
+        return self
+
+    def __len__(self) -> int:
+        return self.index.box_count
+
+    def at(self, point: np.ndarray) -> list[SpeedBox]:
+        return self._rules(self.index.boxes_at(point))
+
+    def on_segment(self, start: np.ndarray, end: np.ndarray) -> list[SpeedBox]:
+        return self._rules(self.index.boxes_on_segment(start, end))
+
+    def _rules(self, entities: list[int]) -> list[SpeedBox]:
+        boxes = []
+        for entity in entities:
+            key = self.index.version(entity)
+            cached = self._boxes.get(entity)
+            if cached is None or cached[0] != key:
+                scene = self.scene
+                cached = (key, speed_box(entity, scene.get(entity, Transform), scene.get(entity, Aberration)))
+                self._boxes[entity] = cached
+            boxes.append(cached[1])
+        return sorted(boxes, key=lambda b: (b.priority, b.entity))
+
+
+Boxes = Sequence[SpeedBox] | SpeedBoxes
+
+
+def active_box(boxes: Boxes, point: np.ndarray) -> SpeedBox | None:
     """The containing box with the highest priority (ties: the later entity), or ``None``."""
-    for box in reversed(boxes):
+    near = boxes.at(point) if isinstance(boxes, SpeedBoxes) else boxes
+    for box in reversed(near):
         if box.contains(point):
             return box
     return None
@@ -90,7 +133,7 @@ def _eps(point: np.ndarray) -> float:
     return FACE_EPS * (1.0 + float(np.max(np.abs(point))))
 
 
-def first_face_crossing(boxes: Sequence[SpeedBox], start: np.ndarray, delta: np.ndarray) -> float | None:
+def first_face_crossing(boxes: Boxes, start: np.ndarray, delta: np.ndarray) -> float | None:
     """Smallest parameter ``t`` in (0, 1) where ``start + t·delta`` crosses any box face.
 
     Faces within a tolerance of ``start`` are ignored: that is the face the
@@ -101,7 +144,8 @@ def first_face_crossing(boxes: Sequence[SpeedBox], start: np.ndarray, delta: np.
         return None
     t_min = _eps(start) / length
     best: float | None = None
-    for box in boxes:
+    near = boxes.on_segment(start, start + delta) if isinstance(boxes, SpeedBoxes) else boxes
+    for box in near:
         a = box.to_local[:3, :3] @ start + box.to_local[:3, 3]
         b = box.to_local[:3, :3] @ delta
         t_near, t_far = -math.inf, math.inf
@@ -124,7 +168,7 @@ def first_face_crossing(boxes: Sequence[SpeedBox], start: np.ndarray, delta: np.
 
 
 def walk(
-    boxes: Sequence[SpeedBox], start: np.ndarray, v: np.ndarray, dt: float, max_substeps: int = MAX_SUBSTEPS
+    boxes: Boxes, start: np.ndarray, v: np.ndarray, dt: float, max_substeps: int = MAX_SUBSTEPS
 ) -> list[np.ndarray]:
     """The camera's path for one tick: perceived velocity ``v`` for ``dt`` seconds of perceived time.
 
@@ -198,8 +242,10 @@ class CameraMovementProcessor(esper.Processor):
         motion: MotionRecord,
         sprint_multiplier: float = SPRINT_MULTIPLIER,
         max_substeps: int = MAX_SUBSTEPS,
+        index: SpaceIndex | None = None,
     ) -> None:
         self.scene = scene
+        self.boxes = SpeedBoxes(scene, index)
         self.input_source = input_source
         self.motion = motion
         self.sprint_multiplier = sprint_multiplier
@@ -221,7 +267,7 @@ class CameraMovementProcessor(esper.Processor):
         v = perceived_velocity(rotation, state.move, speed, multiplier)
         position = np.asarray(transform.position, dtype=np.float64)
         if np.any(v) and dt > 0.0:
-            path = walk(speed_boxes(self.scene), position, v, dt, self.max_substeps)
+            path = walk(self.boxes.sync(), position, v, dt, self.max_substeps)
             self.motion.path = path
             position = path[-1]
         self.scene.set(

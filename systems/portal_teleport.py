@@ -1,11 +1,12 @@
-"""Portal teleport: the camera's path this tick, tested against every linked portal quad.
+"""Portal teleport: the camera's path this tick, tested against the linked portal quads it may pass.
 
 The second system of a tick (docs/design.md section 6). The test is on the *segment* walked this tick, not on
 the end point, so a fast camera cannot tunnel through a portal; the camera
 arrives on the target quad and the target is skipped for the rest of that
 segment (and a segment that starts on a quad does not cross it), so it never
 oscillates; at most :data:`MAX_CROSSINGS` crossings per tick, so facing
-portals terminate.
+portals terminate. Each tick tests only the quads whose bounds the segment
+meets (:class:`PortalLinks`, through :class:`engine.space_index.SpaceIndex`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from components import Portal, Transform
 from engine.errors import SceneError
 from engine.maths import quat_from_matrix, quat_to_matrix, trs_inverse, trs_matrix
 from engine.scene import Scene
+from engine.space_index import SpaceIndex
 from systems.state import MotionRecord
 
 #: Portal crossings allowed per tick; after the last one the camera stays where it arrived.
@@ -56,32 +58,83 @@ def rotation_part(linear: np.ndarray) -> np.ndarray:
     return r
 
 
+def portal_target(scene: Scene, entity: int, portal: Portal) -> int:
+    """The entity a linked portal leads into (a SceneError naming the portal when that is no portal)."""
+    assert portal.target is not None
+    try:
+        target = scene.entity(portal.target)
+    except SceneError:
+        raise SceneError(
+            f"no entity is named {portal.target!r}", entity=scene.name_of(entity), field="portal.target"
+        ) from None
+    if not (scene.has(target, Transform) and scene.has(target, Portal)):
+        raise SceneError(
+            f"{portal.target!r} is not a portal (a portal's target must be another portal)",
+            entity=scene.name_of(entity),
+            field="portal.target",
+        )
+    return target
+
+
+def portal_link(scene: Scene, entity: int, transform: Transform, portal: Portal) -> PortalLink | None:
+    """The link of one portal entity, ``None`` for an inert one (no target)."""
+    if portal.target is None:
+        return None
+    target = portal_target(scene, entity, portal)
+    target_transform = scene.get(target, Transform)
+    inverse = trs_inverse(transform.position, transform.rotation, transform.scale)
+    transfer = trs_matrix(target_transform.position, target_transform.rotation, target_transform.scale) @ inverse
+    return PortalLink(entity, target, inverse, abs(transform.scale[2]), transfer, rotation_part(transfer[:3, :3]))
+
+
 def portal_links(scene: Scene) -> list[PortalLink]:
     """Every portal with a target, in creation order (inert portals are left out)."""
-    rows = scene.query(Transform, Portal)
-    links = []
-    for entity, (transform, portal) in rows:
-        if portal.target is None:
-            continue
-        try:
-            target = scene.entity(portal.target)
-        except SceneError:
-            raise SceneError(
-                f"no entity is named {portal.target!r}", entity=scene.name_of(entity), field="portal.target"
-            ) from None
-        target_transform = scene.try_get(target, Transform)
-        if target_transform is None or not scene.has(target, Portal):
-            raise SceneError(
-                f"{portal.target!r} is not a portal (a portal's target must be another portal)",
-                entity=scene.name_of(entity),
-                field="portal.target",
-            )
-        inverse = trs_inverse(transform.position, transform.rotation, transform.scale)
-        transfer = trs_matrix(target_transform.position, target_transform.rotation, target_transform.scale) @ inverse
-        links.append(
-            PortalLink(entity, target, inverse, abs(transform.scale[2]), transfer, rotation_part(transfer[:3, :3]))
-        )
-    return links
+    links = [portal_link(scene, entity, t, p) for entity, (t, p) in scene.query(Transform, Portal)]
+    return [link for link in links if link is not None]
+
+
+class PortalLinks:
+    """The scene's portal links near a segment: the quads whose bounds it meets (a
+    :class:`engine.space_index.SpaceIndex` query), in creation order as :func:`portal_links` has them. A link
+    is made again only when its portal or its target changed."""
+
+    def __init__(self, scene: Scene, index: SpaceIndex | None = None) -> None:
+        self.scene = scene
+        self.index = index or SpaceIndex()
+        self._links: dict[int, tuple[object, PortalLink | None]] = {}
+        self._checked: tuple[int, int] | None = None
+
+    def sync(self) -> PortalLinks:
+        """Catch up with the scene; a portal that changed (every one, when the set changed) must lead into a
+        portal, or a SceneError names it."""
+        self.index.sync(self.scene)
+        changed, self._checked = self.index.portals_changed(self._checked)
+        for entity in changed:
+            portal = self.scene.get(entity, Portal)
+            if portal.target is not None:
+                portal_target(self.scene, entity, portal)
+        return self
+
+    def __len__(self) -> int:
+        return self.index.portal_count
+
+    def near(self, start: np.ndarray, end: np.ndarray) -> list[PortalLink]:
+        links = (self._link(entity) for entity in self.index.portals_on_segment(start, end))
+        return [link for link in links if link is not None]
+
+    def _link(self, entity: int) -> PortalLink | None:
+        portal = self.scene.get(entity, Portal)
+        target = None if portal.target is None else portal_target(self.scene, entity, portal)
+        key = (self.index.version(entity), portal.target, None if target is None else self.index.version(target))
+        cached = self._links.get(entity)
+        if cached is None or cached[0] != key:
+            cached = (key, portal_link(self.scene, entity, self.scene.get(entity, Transform), portal))
+            self._links[entity] = cached
+        return cached[1]
+
+
+def _near(links: Sequence[PortalLink] | PortalLinks, start: np.ndarray, end: np.ndarray) -> Sequence[PortalLink]:
+    return links.near(start, end) if isinstance(links, PortalLinks) else links
 
 
 def segment_crossing(link: PortalLink, start: np.ndarray, end: np.ndarray) -> float | None:
@@ -104,11 +157,11 @@ def segment_crossing(link: PortalLink, start: np.ndarray, end: np.ndarray) -> fl
 
 
 def first_crossing(
-    links: Sequence[PortalLink], start: np.ndarray, end: np.ndarray, skip: int | None = None
+    links: Sequence[PortalLink] | PortalLinks, start: np.ndarray, end: np.ndarray, skip: int | None = None
 ) -> tuple[float, PortalLink] | None:
     """The earliest portal the segment passes through (ties: the earlier entity), skipping ``skip``."""
     best: tuple[float, PortalLink] | None = None
-    for link in links:
+    for link in _near(links, start, end):
         if link.entity == skip:
             continue
         t = segment_crossing(link, start, end)
@@ -127,7 +180,7 @@ class TeleportResult:
 
 
 def teleport_path(
-    links: Sequence[PortalLink], path: Sequence[np.ndarray], max_crossings: int = MAX_CROSSINGS
+    links: Sequence[PortalLink] | PortalLinks, path: Sequence[np.ndarray], max_crossings: int = MAX_CROSSINGS
 ) -> TeleportResult:
     """Follow a polyline through portals: at each first crossing, map the rest of it through ``X``."""
     points = [np.asarray(p, dtype=np.float64) for p in path]
@@ -156,16 +209,19 @@ def teleport_path(
 class PortalTeleportProcessor(esper.Processor):
     """Teleports the camera along this tick's path (from :class:`systems.state.MotionRecord`) through linked portals."""
 
-    def __init__(self, scene: Scene, motion: MotionRecord, max_crossings: int = MAX_CROSSINGS) -> None:
+    def __init__(
+        self, scene: Scene, motion: MotionRecord, max_crossings: int = MAX_CROSSINGS, index: SpaceIndex | None = None
+    ) -> None:
         self.scene = scene
         self.motion = motion
         self.max_crossings = max_crossings
+        self.links = PortalLinks(scene, index)
 
     def process(self, dt: float) -> None:
         entity = self.scene.camera_entity
         if entity is None or not self.motion.moved:
             return
-        links = portal_links(self.scene)
+        links = self.links.sync()
         if not links:
             return
         result = teleport_path(links, self.motion.path, self.max_crossings)

@@ -263,6 +263,47 @@ def boxes_scene() -> Scene:
     return scene
 
 
+def crowded(kind: str, n: int, seed: int = 0, in_view: bool = True) -> Scene:
+    """A floor and a few meshes with ``n`` portals or ``n`` aberration boxes (``kind``), of random place, size
+    and turn, in front of the camera (``in_view``) or behind it. Portals come in pairs: one of each in the
+    view space, its target in a far room of other meshes. Boxes mix the three modes and overlap, with
+    random priorities."""
+    rng = np.random.default_rng(seed)
+    scene = Scene(f"crowded-{kind}-{n}-{seed}")
+    for room, x0 in (("", 0.0), ("far_", 60.0)):
+        scene.add_mesh(f"{room}floor", "plane", position=(x0, 0.0, 0.0), scale=(30.0, 1.0, 30.0), checker=0.5)
+        for k in range(6):
+            scene.add_mesh(
+                f"{room}m{k}", ("box", "sphere", "cylinder")[k % 3],
+                position=(x0 + rng.uniform(-4.0, 4.0), rng.uniform(0.3, 2.0), rng.uniform(-8.0, -2.0)),
+                euler_deg=tuple(rng.uniform(-180.0, 180.0, 3)), scale=tuple(rng.uniform(0.4, 1.2, 3)),
+                color=tuple(rng.uniform(0.2, 1.0, 3)),
+            )  # fmt: skip
+
+    def place() -> dict:
+        z = rng.uniform(-7.0, 0.5) if in_view else rng.uniform(9.0, 14.0)
+        return dict(
+            position=(rng.uniform(-4.0, 4.0), rng.uniform(0.2, 3.0), z),
+            euler_deg=tuple(rng.uniform(-180.0, 180.0, 3)),
+            scale=tuple(rng.uniform(0.15, 0.8, 3)),
+        )
+
+    if kind == "portals":
+        for k in range(0, n - 1, 2):
+            target = place()
+            target["position"] = (60.0 + target["position"][0], *target["position"][1:])
+            scene.add_portal_pair(f"p{k}", f"p{k + 1}", a=place(), b=target)
+    else:
+        modes = ("metric", "radial", "additive")
+        for k in range(n):
+            scene.add_aberration(
+                f"a{k}", tuple(rng.uniform(-0.5, 0.5, 3)), mode=modes[k % 3], priority=int(rng.integers(0, 4)),
+                exit=("restore", "repeat", "invert")[k % 3], **place(),
+            )  # fmt: skip
+    scene.set_camera((0.0, 1.8, 6.0), look_at=(0.0, 1.0, -3.0), fov_deg=70.0)
+    return scene
+
+
 def write_obj(path: Path, vertices, faces) -> Path:
     """A minimal OBJ file (0-based ``faces``), for meshes no primitive makes."""
     lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in vertices]

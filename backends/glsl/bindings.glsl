@@ -26,6 +26,7 @@ layout(rgba32ui, binding = 7) readonly restrict uniform uimage2D aberrations_img
 layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
 layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D tlas_nodes_img;
 layout(rgba32ui, binding = 10) readonly restrict uniform uimage2D triangle_blocks_img;
+layout(rgba32ui, binding = 11) readonly restrict uniform uimage2D space_nodes_img;
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -60,6 +61,7 @@ Instance fetch_instance_(int i) { return Instance_from_texels(instances_img, i *
 Aberration fetch_aberration_(int i) { return Aberration_from_texels(aberrations_img, i * ABERRATIONS_STRIDE); }
 Portal fetch_portal_(int i) { return Portal_from_texels(portals_img, i * PORTALS_STRIDE); }
 TlasNode fetch_tlas_node_(int i) { return TlasNode_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
+SpaceNode fetch_space_node_(int i) { return SpaceNode_from_texels(space_nodes_img, i * SPACE_NODES_STRIDE); }
 Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
 
 /* Table access: a record (fetched whole; the compiler drops the loads of unused fields). */
@@ -73,6 +75,7 @@ Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
 #define PORTAL(i) (fetch_portal_(i))
 #define TLAS_NODE(i) (fetch_tlas_node_(i))
 #define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
+#define SPACE_NODE(i) (fetch_space_node_(i))
 #define CAMERA_ROW (fetch_camera_())
 
 #else /* storage buffers */
@@ -87,6 +90,7 @@ layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberratio
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
 layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
 layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
+layout(std430, binding = 10) readonly restrict buffer SpaceNodeTable { SpaceNode space_nodes_data[]; };
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -100,6 +104,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define PORTAL(i) (portals_data[(i)])
 #define TLAS_NODE(i) (tlas_nodes_data[(i)])
 #define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
+#define SPACE_NODE(i) (space_nodes_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 
 #endif

@@ -18,6 +18,7 @@ __kernel void trace(__global const Settings* settings,
                     __global const Portal* portals,
                     __global const TlasNode* tlas_nodes,
                     __global const TriangleBlock* triangle_blocks,
+                    __global const SpaceNode* space_nodes,
                     __global const Camera* camera,
                     __global uchar4* color_out,
                     __global float* depth_out,
@@ -42,6 +43,7 @@ __kernel void trace(__global const Settings* settings,
     sc.portals = portals;
     sc.tlas_nodes = tlas_nodes;
     sc.triangle_blocks = triangle_blocks;
+    sc.space_nodes = space_nodes;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {

@@ -11,8 +11,9 @@ One rule per function, so each ports to a kernel function one to one:
 * :func:`transition` — what happens to ``w`` and ``r`` when the active box changes.
 
 Boxes are iterated one at a time (rows in table order) with every ray at
-once: scenes hold a handful of boxes, and a kernel loops over them the same
-way. Box rows are sorted by (priority, entity), so "the last row that
+once, as a kernel loops over them; among many, each with only the rays or
+points that can reach it (:mod:`backends.reference.space_tree`: the same
+results). Box rows are sorted by (priority, entity), so "the last row that
 contains a point" is the highest-priority box, ties going to the later entity.
 """
 
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from backends.reference.directions import affine_points, linear_vectors, normalize_or_keep
+from backends.reference.space_tree import SpaceTree
 
 #: Mode codes (engine.layout.ABERRATION_MODES); NO_MODE is "no active box".
 NO_MODE, METRIC, RADIAL, ADDITIVE = -1, 0, 1, 2
@@ -34,6 +36,8 @@ NO_BOX = -1
 FACES = 6
 #: Radial mode: an axis whose corner-ray range is narrower than this uses σ_k = sign(v_k).
 COLLAPSED_RANGE = 1e-6
+#: The unit box's corners in its local frame.
+BOX_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,7 @@ class Boxes:
     mode: np.ndarray  # (B,) METRIC / RADIAL / ADDITIVE
     exit: np.ndarray  # (B,) RESTORE / REPEAT / INVERT
     entity: np.ndarray  # (B,)
+    tree: SpaceTree | None = None  # over the boxes, when there are many
 
     def __len__(self) -> int:
         return len(self.mode)
@@ -54,13 +59,15 @@ class Boxes:
     def from_table(table: np.ndarray, count: int) -> Boxes:
         rows = table[:count]
         meta = rows["meta"].astype(np.int64).reshape(-1, 4)
+        world_to_local = rows["world_to_local"].astype(np.float64).reshape(-1, 3, 4)
         return Boxes(
-            world_to_local=rows["world_to_local"].astype(np.float64).reshape(-1, 3, 4),
+            world_to_local=world_to_local,
             rotation=rows["rotation"][:, :, :3].astype(np.float64).reshape(-1, 3, 3),
             deformation=rows["deformation"][:, :3].astype(np.float64).reshape(-1, 3),
             mode=meta[:, 0],
             exit=meta[:, 1],
             entity=meta[:, 3],
+            tree=SpaceTree.over(world_to_local, BOX_CORNERS),
         )
 
     @staticmethod
@@ -137,25 +144,30 @@ def nearest_box_faces(
     """
     n = len(o)
     best_t, best_face = np.full(n, np.inf), np.full(n, -1, np.int64)
-    for row in range(len(boxes)):
+    every = slice(None)
+    rows = ((row, every) for row in range(len(boxes))) if boxes.tree is None else boxes.tree.ray_rows(o, r, t_min)
+    for row, rays in rows:
         m = boxes.world_to_local[row]
-        t_near, near_face, t_far, far_face = slab_faces(affine_points(m, o), linear_vectors(m, r))
+        t_near, near_face, t_far, far_face = slab_faces(affine_points(m, o[rays]), linear_vectors(m, r[rays]))
         crosses = t_near <= t_far
         for t, face in ((t_near, near_face), (t_far, far_face)):
             face_id = FACES * row + face
-            ok = crosses & (face >= 0) & np.isfinite(t) & (t > t_min) & (t < best_t) & (face_id != skip_face)
-            best_t, best_face = np.where(ok, t, best_t), np.where(ok, face_id, best_face)
+            ok = crosses & (face >= 0) & np.isfinite(t) & (t > t_min[rays]) & (t < best_t[rays])
+            ok &= face_id != skip_face[rays]
+            best_t[rays], best_face[rays] = np.where(ok, t, best_t[rays]), np.where(ok, face_id, best_face[rays])
     return best_t, best_face
 
 
 def containing_box(boxes: Boxes, points: np.ndarray) -> np.ndarray:
     """The active box at each point: the last row whose closed unit box contains it, NO_BOX for none."""
-    rows = np.full(len(points), NO_BOX, np.int64)
+    found = np.full(len(points), NO_BOX, np.int64)
+    every = slice(None)
+    rows = ((row, every) for row in range(len(boxes))) if boxes.tree is None else boxes.tree.point_rows(points)
     with np.errstate(invalid="ignore"):
-        for row in range(len(boxes)):
-            local = affine_points(boxes.world_to_local[row], points)
-            rows = np.where(np.all(np.abs(local) <= 0.5, axis=1), row, rows)
-    return rows
+        for row, at in rows:
+            local = affine_points(boxes.world_to_local[row], points[at])
+            found[at] = np.where(np.all(np.abs(local) <= 0.5, axis=1), row, found[at])
+    return found
 
 
 # --- how they deform rays -------------------------------------------------------------------------

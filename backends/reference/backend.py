@@ -65,6 +65,7 @@ class ReferenceBackend(Backend):
                 " (ScenePacker)"
             )
         updates = list(updates)
+        first = not self._tables
         for u in updates:
             source = packed.tables[u.table]
             mine = self._tables.get(u.table)
@@ -85,9 +86,11 @@ class ReferenceBackend(Backend):
             self._geometry = Geometry.from_tables(self._tables, self._counts, reuse_mesh_data=self._geometry)
         if self._settings is None or "settings" in changed:
             self._settings = ShadingSettings.from_table(self._tables["settings"])
-        # A few rows each: converted on every upload, so they can never go stale.
-        self._boxes = Boxes.from_table(self._tables["aberrations"], self._counts.get("aberrations", 0))
-        self._portals = Portals.from_table(self._tables["portals"], self._counts.get("portals", 0))
+        # Converted (and their trees built) when their tables change.
+        if first or "aberrations" in changed:
+            self._boxes = Boxes.from_table(self._tables["aberrations"], self._counts.get("aberrations", 0))
+        if first or "portals" in changed:
+            self._portals = Portals.from_table(self._tables["portals"], self._counts.get("portals", 0))
         return packed.update_bytes(updates)
 
     def trace_rays(

@@ -6,7 +6,8 @@
 A portal is the quad [-1, 1]² at z = 0 of its local space, two-sided. Only
 linked portals (target row >= 0) are ever hit: an unlinked portal is inert
 and invisible. Portals are iterated one at a time with every ray at once, as
-a kernel loops over them.
+a kernel loops over them; among many, each with only the rays that can reach
+it (:mod:`backends.reference.space_tree`: the same results).
 """
 
 from __future__ import annotations
@@ -16,6 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from backends.reference.directions import affine_points, linear_vectors, normalize_or_keep
+from backends.reference.space_tree import SpaceTree
+
+#: A portal's quad in its local frame: [-1, 1]^2 at z = 0.
+QUAD_CORNERS = np.array([[x, y, 0.0] for x in (-1.0, 1.0) for y in (-1.0, 1.0)])
 
 #: The row of "no portal"; also the target of an unlinked portal.
 NO_PORTAL = -1
@@ -29,6 +34,7 @@ class Portals:
     transfer: np.ndarray  # (P, 3, 4): X = M_target · M_self⁻¹
     target: np.ndarray  # (P,) target row, NO_PORTAL when unlinked
     entity: np.ndarray  # (P,)
+    tree: SpaceTree | None = None  # over the quads, when there are many
 
     def __len__(self) -> int:
         return len(self.target)
@@ -37,11 +43,13 @@ class Portals:
     def from_table(table: np.ndarray, count: int) -> Portals:
         rows = table[:count]
         meta = rows["meta"].astype(np.int64).reshape(-1, 4)
+        world_to_local = rows["world_to_local"].astype(np.float64).reshape(-1, 3, 4)
         return Portals(
-            world_to_local=rows["world_to_local"].astype(np.float64).reshape(-1, 3, 4),
+            world_to_local=world_to_local,
             transfer=rows["transfer"].astype(np.float64).reshape(-1, 3, 4),
             target=meta[:, 0],
             entity=meta[:, 1],
+            tree=SpaceTree.over(world_to_local, QUAD_CORNERS),
         )
 
     @staticmethod
@@ -61,18 +69,20 @@ def nearest_portal_hits(
     """
     n = len(o)
     best_t, best_row = np.full(n, np.inf), np.full(n, NO_PORTAL, np.int64)
+    every = slice(None)
+    rows = ((row, every) for row in range(len(portals))) if portals.tree is None else portals.tree.ray_rows(o, r, t_min)
     with np.errstate(all="ignore"):
-        for row in range(len(portals)):
+        for row, rays in rows:
             if portals.target[row] < 0:
                 continue
             m = portals.world_to_local[row]
-            a, v = affine_points(m, o), linear_vectors(m, r)
+            a, v = affine_points(m, o[rays]), linear_vectors(m, r[rays])
             crossing = v[:, 2] != 0.0
             t = -a[:, 2] / np.where(crossing, v[:, 2], 1.0)
             x, y = a[:, 0] + t * v[:, 0], a[:, 1] + t * v[:, 1]
             on_quad = (np.abs(x) <= 1.0) & (np.abs(y) <= 1.0)
-            ok = crossing & np.isfinite(t) & (t > t_min) & on_quad & (t < best_t) & (skip != row)
-            best_t, best_row = np.where(ok, t, best_t), np.where(ok, row, best_row)
+            ok = crossing & np.isfinite(t) & (t > t_min[rays]) & on_quad & (t < best_t[rays]) & (skip[rays] != row)
+            best_t[rays], best_row[rays] = np.where(ok, t, best_t[rays]), np.where(ok, row, best_row[rays])
     return best_t, best_row
 
 

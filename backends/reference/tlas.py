@@ -72,13 +72,15 @@ def instance_pairs(
     inverse: np.ndarray,
     t_min: np.ndarray,
     t_max: np.ndarray,
+    pad: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(ray, instance, entry t) for every instance box each ray crosses within (t_min, t_max)."""
+    """(ray, instance, entry t) for every instance box each ray crosses within (t_min, t_max); the tree's
+    nodes grown by ``pad`` (the instance boxes given are tested as they are)."""
     f_ray = np.arange(len(origin))
     f_node = np.zeros(len(origin), np.int64)
     rays, insts = [], []
     while f_ray.size:
-        near, far = slab(origin[f_ray], inverse[f_ray], tree.lo[f_node], tree.hi[f_node])
+        near, far = slab(origin[f_ray], inverse[f_ray], tree.lo[f_node] - pad, tree.hi[f_node] + pad)
         keep = (far >= np.maximum(near, t_min[f_ray])) & (near <= t_max[f_ray])
         f_ray, f_node = f_ray[keep], f_node[keep]
         leaf = tree.count[f_node] > 0

@@ -19,12 +19,15 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
+from typing import ClassVar
 
 import numpy as np
 
 from engine import layout
 from engine.box_clearance import instance_bounds
+from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
+from engine.tlas import rows_at
 
 from .layout_h import layout_h
 
@@ -39,6 +42,8 @@ TRACER_FILES: tuple[str, ...] = (
     "instances.h",
     "shade.h",
     "space.h",
+    "boxes.h",
+    "portals.h",
     "journey.h",
 )
 
@@ -163,18 +168,65 @@ def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
     return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)
 
 
+#: The loops' iterations grow with the portal and box counts at every event; llvmpipe ends every loop of a
+#: shader invocation after 65,535 iterations of them all together (Mesa's LP_MAX_TGSI_LOOP_ITERATIONS),
+#: which 16 events over 4,400 portals used up. The trees' grow with their depth: each backend loops only
+#: below a few (UploadedScene.tree_min).
+
+
+def tree_depth(nodes: np.ndarray, root: int) -> int:
+    """Levels of the binary tree of ``nodes`` (TLAS layout: ``count == 0`` interior) from row ``root``."""
+    frontier = np.array([root], np.int64)
+    depth = 0
+    while frontier.size and depth <= len(nodes):
+        depth += 1
+        inner = frontier[nodes["count"][frontier] == 0]
+        first = nodes["first"][inner].astype(np.int64)
+        frontier = np.concatenate([first, first + 1])
+    return depth
+
+
+def space_defines(packed: PackedScene, tree_min: tuple[int, int]) -> dict[str, int]:
+    """PORTAL_TREE, BOX_TREE and SPACE_STACK_SIZE for a packed scene: a tree where there are more portals or
+    boxes than ``tree_min`` says pay for it, a stack as deep as the deeper tree (rounded up to 8, so few
+    variants exist)."""
+    portals, boxes = packed.counts.get("portals", 0), packed.counts.get("aberrations", 0)
+    nodes, roots = packed.tables["space_nodes"], packed.tables["settings"]["space_roots"][0]
+    use_portals, use_boxes = portals > tree_min[0], boxes > tree_min[1]
+    depth = max(
+        tree_depth(nodes, int(roots[0])) if use_portals else 0, tree_depth(nodes, int(roots[1])) if use_boxes else 0
+    )
+    return {
+        "PORTAL_TREE": int(use_portals),
+        "BOX_TREE": int(use_boxes),
+        "SPACE_STACK_SIZE": max(MIN_SPACE_STACK, -(-depth // 8) * 8),
+    }
+
+
+#: The smallest stack of the trees over portals and boxes.
+MIN_SPACE_STACK = 16
+
+
 class UploadedScene:
     """Mixin of the fast backends: what they keep of their last upload. The tree defines, stack sizes
     and features pick the kernel variant; origin, boxes and instance bounds pack the camera row."""
+
+    #: Above this many portals, and boxes, the kernels find them through their trees, below it with loops
+    #: (where those are as fast: each backend's own, from scripts/space_scale.py A/Bs).
+    tree_min: ClassVar[tuple[int, int]] = (8, 4)
 
     def _forget_upload(self) -> None:
         self._counts: dict[str, int] = {}
         self._origin = np.zeros(3)
         self._boxes: np.ndarray | None = None
+        self._box_tree: tuple[np.ndarray, int] | None = None
+        self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
+        self._portal_root: int | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._features = Features()
         self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
         self._tlas_stack = MIN_TLAS_STACK
+        self._space: dict[str, int] = {"PORTAL_TREE": 0, "BOX_TREE": 0, "SPACE_STACK_SIZE": MIN_SPACE_STACK}
         self._uploaded = False
 
     def _note_upload(self, packed: PackedScene, rewritten: set[str]) -> None:
@@ -183,11 +235,37 @@ class UploadedScene:
             self._bvh = bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         if "tlas_nodes" in rewritten:
             self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
+        if rewritten & {"space_nodes", "portals", "aberrations"}:
+            self._space = space_defines(packed, self.tree_min)
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.
         self._boxes = packed.tables["aberrations"][: packed.counts.get("aberrations", 0)].copy()
+        # ... and the trees over the boxes and the portals, to find it among many and to see what the camera sees.
+        nodes, roots = packed.tables["space_nodes"].copy(), packed.tables["settings"]["space_roots"][0]
+        self._space_nodes = nodes
+        self._box_tree = (nodes, int(roots[1])) if self._boxes.size else None
+        self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
         self._features = packed.features
         self._uploaded = True
+
+    def _frame_features(self, camera: CameraView, width: int, height: int) -> Features:
+        """The features a frame needs: none of the space's where the host proves that no primary ray meets a
+        portal or a box (all outside the camera's pyramid, the camera in no box). Every ray then has one leg,
+        and the Euclidean variant gives the same frame without paying for the space's code."""
+        features = self._features
+        if not (features.portals or features.aberration_modes):
+            return features
+        aspect = width / height
+        portal_root = self._portal_root if features.portals else None
+        if portal_root is not None and view_reaches(camera, aspect, self._origin, self._space_nodes, portal_root):
+            return features
+        if features.aberration_modes and self._box_tree is not None:
+            nodes, root = self._box_tree
+            position = np.asarray(camera.position, dtype=np.float64) - self._origin
+            near = CAMERA_FACE_MARGIN * max(1.0, float(np.linalg.norm(position)))
+            if view_reaches(camera, aspect, self._origin, nodes, root) or rows_at(nodes, root, position, near):
+                return features
+        return Features(False, frozenset(), features.max_events)

@@ -21,6 +21,7 @@ typedef struct SceneTables {
     __global const Portal* portals;
     __global const TlasNode* tlas_nodes;
     __global const TriangleBlock* triangle_blocks;
+    __global const SpaceNode* space_nodes;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -37,3 +38,4 @@ typedef struct SceneTables {
 #define PORTAL(i) (sc.portals[(i)])
 #define TLAS_NODE(i) (sc.tlas_nodes[(i)])
 #define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])
+#define SPACE_NODE(i) (sc.space_nodes[(i)])

@@ -189,7 +189,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
     while (!done) {
         while (count == 0 && !done) {
             bool found;
-            BINARY_STEP(BvhNode, BVH_NODE, BVH_STACK_SIZE, oo, inv, first, found)
+            BINARY_STEP(BvhNode, BVH_NODE, BVH_STACK_SIZE, NODE_SLAB, oo, inv, first, found)
             done = !found;
             first = AS_INT(node.lo.w);
             count = AS_INT(node.hi.w);

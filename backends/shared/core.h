@@ -7,7 +7,9 @@
  *   bvh_wide.h    an instance's 4- or 8-wide tree
  *   instances.h   the nearest mesh hit: the tree over instances, then each instance's tree
  *   shade.h       the colour of a hit
- *   space.h       aberration boxes and portals: faces, transitions, teleports
+ *   space.h       what boxes and portals share: vector rules, the tie rule, their trees (space_nodes)
+ *   boxes.h       aberration boxes: faces, the box holding a point, transitions
+ *   portals.h     portals: the nearest quad, teleports
  *   journey.h     primary rays and the event loop: trace_pixel, the kernels' entry point
  *
  * Written once in the common subset of GLSL 4.30 and OpenCL C 1.2, so the two
@@ -31,7 +33,7 @@
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
  *               BVH_NODE(i) (a BvhNode, a BvhCompactNode with BVH_COMPACT, or a Bvh4Node /
  *               Bvh8Node by BVH_WIDTH), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i),
- *               TLAS_NODE(i), TRIANGLE_BLOCK(i) (records, from the bindings file)
+ *               TLAS_NODE(i), TRIANGLE_BLOCK(i), SPACE_NODE(i) (records, from the bindings file)
  *
  * Compile-time defines (engine.packed.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport
@@ -53,9 +55,14 @@
  *                      links in one 32-byte record (the packer's bvh_compact; GLSL on llvmpipe)
  *   USE_TLAS           find instances through the top-level tree (tlas_nodes), not a loop over all
  *   TLAS_STACK_SIZE    its traversal stack; the host sizes it to the tree's depth
+ *   PORTAL_TREE        find the portal a ray passes through the tree over portals (space_nodes), not a
+ *                      loop over all; BOX_TREE the same for box faces and the box holding a point; the
+ *                      host sets them above a few portals / boxes, where the tree is faster
+ *   SPACE_STACK_SIZE   their traversal stack; the host sizes it to the deeper tree's depth
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
- *                      the camera row's lens.z); FACE_NEXT_BOX 1: the box after a face of a box alone
- *                      (rot1.w) from the face, not the loop (engine/box_clearance.py); 0 for A/B only
+ *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
+ *                      box after a face of a box alone (rot1.w) from the face, not the loop
+ *                      (engine/box_clearance.py); 0 for A/B only
  *
  * Entry point (journey.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -94,6 +101,15 @@
 #ifndef TLAS_STACK_SIZE
 #define TLAS_STACK_SIZE 32
 #endif
+#ifndef PORTAL_TREE
+#define PORTAL_TREE 0
+#endif
+#ifndef BOX_TREE
+#define BOX_TREE 0
+#endif
+#ifndef SPACE_STACK_SIZE
+#define SPACE_STACK_SIZE 16
+#endif
 
 #ifndef HAS_METRIC
 #define HAS_METRIC 0
@@ -107,6 +123,9 @@
 #endif
 #ifndef FACE_NEXT_BOX
 #define FACE_NEXT_BOX 1
+#endif
+#ifndef CAMERA_CLEAR_SEARCH
+#define CAMERA_CLEAR_SEARCH 1
 #endif
 #ifndef HAS_RADIAL
 #define HAS_RADIAL 0
@@ -131,11 +150,15 @@
 #define NUDGE_RELATIVE REAL_C(1.0e-8)
 /* A box's exit t is widened by this fraction of itself: rounding never loses a hit on a face. */
 #define BOX_WIDEN REAL_C(4.0e-16)
+/* A space tree's nodes grow by this fraction of max(1, |o|) around a ray from o (or a point o): far above
+ * the rounding of the quad and box tests in their frames (space.h, space_slab). */
+#define SPACE_PAD REAL_C(1.0e-12)
 #else
 #define T_MIN_RELATIVE REAL_C(1.0e-5)
 #define TIE_RELATIVE REAL_C(2.0e-5)
 #define NUDGE_RELATIVE REAL_C(5.0e-5)
 #define BOX_WIDEN REAL_C(4.8e-7)
+#define SPACE_PAD REAL_C(1.0e-5)
 #endif
 /* A vector shorter than this is not normalised: the previous direction is kept (no NaN ever). */
 #define MIN_NORM REAL_C(1.0e-12)
@@ -253,7 +276,9 @@ bool slab_hit(real2 h, real t_min, real t_max)
  * best.t into node (a NODE, read with FETCH); found tells whether there was one. BINARY_STEP: from the
  * interior node whose children are first and first + 1, to the nearer child the ray enters within
  * (t_min, best.t], the other stacked (up to STACK entries: the host sizes stacks to the tree's
- * depth); neither entered: BINARY_POP. o, inv: the ray in the tree's space. */
+ * depth); neither entered: BINARY_POP. SLAB(o, inv, child): a child's entry and exit t for the ray o, inv
+ * in the tree's space (NODE_SLAB: the node's box; space.h pads its trees' boxes). */
+#define NODE_SLAB(o, inv, c) slab(o, inv, TO_REAL3(c.lo.xyz), TO_REAL3(c.hi.xyz))
 #define BINARY_POP(FETCH, found)                                                                     \
     found = false;                                                                                   \
     while (sp > 0 && !found) {                                                                       \
@@ -263,12 +288,12 @@ bool slab_hit(real2 h, real t_min, real t_max)
             found = true;                                                                            \
         }                                                                                            \
     }
-#define BINARY_STEP(NODE, FETCH, STACK, o, inv, first, found)                                        \
+#define BINARY_STEP(NODE, FETCH, STACK, SLAB, o, inv, first, found)                                  \
     {                                                                                                \
         NODE c0 = FETCH(first);                                                                      \
         NODE c1 = FETCH(first + 1);                                                                  \
-        real2 h0 = slab(o, inv, TO_REAL3(c0.lo.xyz), TO_REAL3(c0.hi.xyz));                           \
-        real2 h1 = slab(o, inv, TO_REAL3(c1.lo.xyz), TO_REAL3(c1.hi.xyz));                           \
+        real2 h0 = SLAB(o, inv, c0);                                                                 \
+        real2 h1 = SLAB(o, inv, c1);                                                                 \
         bool hit0 = slab_hit(h0, t_min, best.t);                                                     \
         bool hit1 = slab_hit(h1, t_min, best.t);                                                     \
         if (hit0 || hit1) {                                                                          \

@@ -44,7 +44,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     while (more) {
         while (AS_INT(node.hi.w) == 0 && more) {
             int first = AS_INT(node.lo.w);
-            BINARY_STEP(TlasNode, TLAS_NODE, TLAS_STACK_SIZE, o, inv, first, more)
+            BINARY_STEP(TlasNode, TLAS_NODE, TLAS_STACK_SIZE, NODE_SLAB, o, inv, first, more)
         }
         if (more) {
             /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node

@@ -117,7 +117,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #else
         bool search = true;
 #endif
-#if SKIP_CLEAR_SEARCH && HAS_SPACE
+#if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH && HAS_SPACE
         /* The first leg starts at the camera: a search that ends (with the tie window for rounding) nearer
          * than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
         if (pass == 0 && (t_cut + REAL(2.0f) * tie_window(ray.o_len, t_cut)) * ray.r_len < cam.lens.z) {

@@ -21,8 +21,9 @@ from test_parity_portals import portal_in_aberrations
 from aberrant.bench.scenes import ten_boxes_aberration, ten_boxes_portals
 from backends.base import AOVS, Frame
 from components import Transform
-from engine.box_clearance import box_clearances, camera_clearance, instance_bounds
+from engine.box_clearance import camera_clearance, instance_bounds
 from engine.camera_view import scene_camera
+from engine.clearances import box_clearances
 from engine.packing import ScenePacker
 from engine.scene import Scene
 

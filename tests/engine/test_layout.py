@@ -12,10 +12,14 @@ from engine.layout import Precision
 # a vec4 of 4-byte scalars aligns to 16, a dvec4 to 32; a struct's size rounds
 # up to its largest member alignment.
 EXPECTED = {
-    ("settings", "f32"): ({"background": 0, "light_dir": 16, "event_limit_color": 32, "shading": 48, "counts": 64}, 80),
+    ("settings", "f32"): (
+        {"background": 0, "light_dir": 16, "event_limit_color": 32, "shading": 48, "counts": 64, "space_roots": 80},
+        96,
+    ),
     ("triangles", "f32"): ({"v0": 0, "v1": 16, "v2": 32}, 48),
     ("triangle_uvs", "f32"): ({"uv01": 0, "uv2": 16}, 32),
     ("bvh_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
+    ("space_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
     ("materials", "f32"): ({"color": 0, "flags": 16}, 32),
     ("triangle_blocks", "f32"): (
         {

@@ -19,7 +19,7 @@ from engine.layout import TLAS_NODE_DTYPE
 from engine.packed import TableUpdate
 from engine.packing import ScenePacker
 from engine.scene import Scene
-from engine.tlas import FAT_MARGIN, InstanceTlas
+from engine.tlas import FAT_MARGIN, AabbTree
 
 
 def random_bounds(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -28,7 +28,7 @@ def random_bounds(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
     return lo, lo + rng.uniform(0.0, 3.0, (n, 3)) * (rng.random((n, 3)) > 0.1)  # some flat (planes)
 
 
-def check_tree(tree: InstanceTlas, lo: np.ndarray, hi: np.ndarray) -> None:
+def check_tree(tree: AabbTree, lo: np.ndarray, hi: np.ndarray) -> None:
     """Every instance in exactly one leaf, reachable from the root; parents hold their children; fat leaves
     hold the exact bounds; parent links and depth agree with the nodes."""
     nodes = tree.nodes
@@ -63,7 +63,7 @@ def check_tree(tree: InstanceTlas, lo: np.ndarray, hi: np.ndarray) -> None:
 @pytest.mark.parametrize("n", [0, 1, 2, 3, 17, 300])
 def test_build_reaches_every_instance_once_and_bounds_nest(n: int) -> None:
     lo, hi = random_bounds(n)
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     check_tree(tree, lo, hi)
     if n > 1:
         assert tree.depth <= 2 * int(np.ceil(np.log2(n))) + 2  # balanced enough for a small stack
@@ -74,7 +74,7 @@ def test_a_floor_spanning_the_scene_sits_near_the_root() -> None:
     lo, hi = random_bounds(40, seed=8)
     lo = np.vstack([lo * 0.1, [[-100.0, -1.0, -100.0]]])
     hi = np.vstack([hi * 0.1, [[100.0, -1.0, 100.0]]])
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     check_tree(tree, lo, hi)
     floor_leaf = int(tree.leaf[40])
     assert tree.parent[floor_leaf] == 0
@@ -82,7 +82,7 @@ def test_a_floor_spanning_the_scene_sits_near_the_root() -> None:
 
 def test_fat_boxes_grow_each_axis_by_the_margin() -> None:
     lo, hi = np.array([[0.0, 0.0, 0.0], [0.0, 5.0, 0.0]]), np.array([[2.0, 1.0, 4.0], [40.0, 5.0, 40.0]])
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     np.testing.assert_allclose(tree.fat_hi[0] - hi[0], FAT_MARGIN * np.array([2.0, 1.0, 4.0]))
     # A plane's thin axis grows by a tenth of its width's margin, not by nothing (and not by its width).
     np.testing.assert_allclose(tree.fat_hi[1] - hi[1], FAT_MARGIN * np.array([40.0, 4.0, 40.0]))
@@ -90,7 +90,7 @@ def test_fat_boxes_grow_each_axis_by_the_margin() -> None:
 
 def test_update_inside_the_fat_box_changes_nothing_outside_refits_the_path() -> None:
     lo, hi = random_bounds(64)
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     before = tree.nodes.copy()
     nudge = 0.5 * np.min(tree.fat_hi[5] - hi[5])
     assert tree.update([5], lo[5:6] + nudge, hi[5:6] + nudge) == []
@@ -112,7 +112,7 @@ def test_update_inside_the_fat_box_changes_nothing_outside_refits_the_path() -> 
 
 def test_many_escaping_at_once_rebuild() -> None:
     lo, hi = random_bounds(64)
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     rows = np.arange(0, 64, 2)
     lo[rows] += 10.0
     hi[rows] += 10.0
@@ -123,7 +123,7 @@ def test_many_escaping_at_once_rebuild() -> None:
 
 def test_translate_keeps_the_tree_valid() -> None:
     lo, hi = random_bounds(50)
-    tree = InstanceTlas.build(lo, hi)
+    tree = AabbTree.build(lo, hi)
     delta = np.array([16.0, -32.0, 0.0])
     tree.translate(delta, lo - delta, hi - delta)
     check_tree(tree, lo - delta, hi - delta)
