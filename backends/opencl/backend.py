@@ -403,7 +403,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
                     options=list(self.build_options), cache_dir=self._cache_dir
                 )
             except cl.Error as e:  # its message carries the build log
-                removed = cache.forget_touched(cache.pocl_cache_dir(), started) if attempt == 1 else []
+                removed = cache.forget_touched(started) if attempt == 1 else []
                 if not removed:
                     raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
                 print(
@@ -458,7 +458,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
         queue.finish()
         traced = time.perf_counter()
-        cache.record_once(cache.pocl_cache_dir(), (self._program_keys[id(kernel)], self.local_size))
+        cache.record_once((self._program_keys[id(kernel)], self.local_size))
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = AOV_DTYPES[name]
