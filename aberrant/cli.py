@@ -18,23 +18,21 @@ import re
 import sys
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TypeVar
 
 import numpy as np
 
+from aberrant.running import PROG, check_frame_memory, one_line, with_fallback
 from aberrant.signals import Terminated, terminations_raise
-from engine.errors import QUOTE_LIMIT, AberrantError, shorten
+from engine.errors import AberrantError, shorten
 
 if TYPE_CHECKING:
     from backends.base import Backend, Frame
 
-PROG = "aberrant"
 #: The largest image side ``render`` accepts (guards against typos like 80000x600).
 MAX_SIDE = 16384
-#: The backend a render falls back to when the chosen one fails while rendering (it traces everything).
-FALLBACK_BACKEND = "reference"
 #: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
 NPZ_AOVS = ("depth", "perceived", "instance", "events")
 #: What a SCENE argument may be (resolved by aberrant/levels.py).
@@ -95,74 +93,6 @@ def _npz_bytes(frame: Frame) -> bytes:
     return buffer.getvalue()
 
 
-def _brief(message: str, errors: int = 2) -> str:
-    """A backend failure in one line: its first line plus the first ``errors`` lines that say "error"
-    (a compiler log can run to hundreds of lines; the first errors are the ones to read)."""
-    lines = [line.strip() for line in message.splitlines() if line.strip()]
-    if not lines:
-        return ""
-    found = [line for line in lines[1:] if "error" in line.lower()][:errors]
-    return _one_line(" | ".join([lines[0], *found]))
-
-
-def _raised_by_backend(error: BaseException, backend: Backend) -> bool:
-    """Whether ``error`` is the backend's own failure (raised in its package), not the scene's or the caller's."""
-    from engine.errors import BackendUnavailable
-
-    if isinstance(error, BackendUnavailable):
-        return True
-    package = type(backend).__module__.rpartition(".")[0] or type(backend).__module__
-    tb = error.__traceback__
-    while tb is not None:
-        module = str(tb.tb_frame.f_globals.get("__name__", ""))
-        if module == package or module.startswith(f"{package}."):
-            return True
-        tb = tb.tb_next
-    return False
-
-
-def _with_fallback(args: argparse.Namespace, render: Callable[[Backend], T]) -> tuple[T, str]:
-    """``render(backend)`` on the chosen backend; with ``auto``, falling back to the reference when it fails.
-
-    A backend named with ``--backend`` (or ``$ABERRANT_BACKEND``) is what runs,
-    or the command fails with its real reason: it never quietly renders with
-    another. ``auto`` (the default) picks the fastest backend that starts here,
-    and a fast backend can still fail on its first frame, when its kernel is
-    built: a driver that cannot compile it, a scene feature it does not trace.
-    The scene itself is fine (it loaded), so the reference, which traces
-    everything, renders it instead, after a one-line message saying which
-    backend failed and the compiler's first errors.
-    """
-    from backends.base import create_backend, default_backend_name
-    from engine.errors import BackendUnavailable
-
-    name = args.backend or default_backend_name()
-    named = name != "auto"
-    try:
-        backend = create_backend(name, precision=args.precision, fallback=not named)
-    except BackendUnavailable as e:
-        raise BackendUnavailable(f"{_brief(str(e))}; --backend auto picks one that can") from None
-    try:
-        return render(backend), backend.name
-    except AberrantError as e:
-        if backend.name == FALLBACK_BACKEND or not _raised_by_backend(e, backend):
-            raise
-        failure = _brief(str(e))
-        if named:
-            raise BackendUnavailable(f"{failure}; --backend auto falls back to one that can") from None
-    finally:
-        backend.release()
-    print(
-        f"{PROG}: the {backend.name} backend failed ({failure}); falling back to the {FALLBACK_BACKEND} backend",
-        file=sys.stderr,
-    )
-    reference = create_backend(FALLBACK_BACKEND, fallback=False)
-    try:
-        return render(reference), reference.name
-    finally:
-        reference.release()
-
-
 def cmd_render(args: argparse.Namespace) -> int:
     from aberrant.levels import open_level
     from backends.base import AOVS
@@ -185,12 +115,13 @@ def cmd_render(args: argparse.Namespace) -> int:
     aovs = AOVS if npz is not None else ("color",)
 
     def render(backend: Backend) -> tuple[Frame, float]:
+        check_frame_memory(backend, (width, height), aovs, "leave out --aovs" if npz is not None else "")
         start = time.perf_counter()
         frame = render_once(scene, backend, (width, height), aovs)
         return frame, (time.perf_counter() - start) * 1e3
 
     try:
-        (frame, elapsed_ms), backend_name = _with_fallback(args, render)
+        (frame, elapsed_ms), backend_name = with_fallback(args, render)
     finally:
         scene.close()
     outputs = {out: _png_bytes(frame.aov("color"))}
@@ -219,6 +150,7 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     scene = level.scene
 
     def render(backend: Backend) -> float:
+        check_frame_memory(backend, (width, height), ("color",), "")
         start = time.perf_counter()
         render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps)
         return time.perf_counter() - start
@@ -227,7 +159,7 @@ def cmd_render_path(args: argparse.Namespace) -> int:
         path = path_for(level)
         frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
         print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps")
-        elapsed, backend_name = _with_fallback(args, render)
+        elapsed, backend_name = with_fallback(args, render)
     finally:
         scene.close()
     print(f"wrote {out}")
@@ -246,7 +178,7 @@ def cmd_import_tello(args: argparse.Namespace) -> int:
     result = import_tello(scene_file, mesh_dir, out, checker=args.checker)
     result.scene.close()
     for warning in result.warnings:
-        print(f"{PROG}: warning: {_one_line(warning)}", file=sys.stderr)
+        print(f"{PROG}: warning: {one_line(warning)}", file=sys.stderr)
     for path in result.mesh_files:
         print(f"wrote {path}")
     counts = ", ".join(f"{n} {kind}" for kind, n in result.counts.items())
@@ -429,16 +361,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: The longest error line printed: one overlong word (a quoted 200 MB name) is cut to its start first.
-MAX_LINE = 1000
-
-
-def _one_line(text: str) -> str:
-    """``text`` on one line, each overlong word shortened and the whole at most :data:`MAX_LINE` characters."""
-    line = " ".join(shorten(word, QUOTE_LIMIT) for word in str(text).split())
-    return line if len(line) <= MAX_LINE else shorten(line, MAX_LINE)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``aberrant`` console script; returns the exit status."""
     parser = build_parser()
@@ -454,11 +376,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.filterwarnings("ignore", message=r".* encountered in ", category=RuntimeWarning)
             return int(args.func(args))
     except AberrantError as e:
-        print(f"{PROG}: error: {_one_line(str(e))}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
     except OSError as e:
         where = f"{shorten(e.filename)}: " if e.filename else ""
-        print(f"{PROG}: error: {where}{_one_line(e.strerror or str(e))}", file=sys.stderr)
+        print(f"{PROG}: error: {where}{one_line(e.strerror or str(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

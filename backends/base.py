@@ -25,6 +25,20 @@ from engine.packed import PackedScene, TableUpdate
 
 #: Outputs a backend can write (docs/semantics.md, "What a frame holds").
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")
+#: Each AOV's element type and per-pixel shape in a :class:`Frame` (17 bytes a pixel for all five).
+AOV_DTYPES: dict[str, tuple[np.dtype, tuple[int, ...]]] = {
+    "color": (np.dtype(np.uint8), (4,)),
+    "depth": (np.dtype(np.float32), ()),
+    "perceived": (np.dtype(np.float32), ()),
+    "instance": (np.dtype(np.int32), ()),
+    "events": (np.dtype(np.uint8), ()),
+}
+
+
+def aov_bytes(aovs: Sequence[str]) -> int:
+    """Bytes one pixel of these AOVs takes in a frame."""
+    return sum(AOV_DTYPES[name][0].itemsize * int(np.prod(AOV_DTYPES[name][1], dtype=np.int64)) for name in aovs)
+
 
 #: Registered backends: name -> "module:Class", imported on first use.
 BACKENDS: dict[str, str] = {
@@ -83,6 +97,17 @@ class Backend(ABC):
     bvh_width: int = 2
     #: Whether its packer should write binary trees as compact records (``ScenePacker(bvh_compact=...)``).
     bvh_compact: ClassVar[bool] = False
+    #: Peak memory of a frame, as copies of its AOVs (device buffers, read-back, the written image) plus
+    #: a working set: :meth:`frame_bytes`, which the CLI checks against the memory budget up front. The
+    #: default is GLSL's, measured through ``aberrant render`` at 4096x4096 on llvmpipe: 12 bytes a
+    #: pixel for the colour image, 48 for all AOVs.
+    aov_copies: ClassVar[float] = 3.0
+    working_bytes: ClassVar[int] = 256 * 2**20
+
+    @classmethod
+    def frame_bytes(cls, width: int, height: int, aovs: Sequence[str]) -> int:
+        """About how much memory rendering (and writing out) a ``width`` x ``height`` frame of ``aovs`` takes."""
+        return int(cls.aov_copies * aov_bytes(aovs) * width * height) + cls.working_bytes
 
     @classmethod
     @abstractmethod

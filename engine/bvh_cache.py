@@ -21,7 +21,7 @@ from engine.bvh import BUILDER_VERSION, Bvh, BvhParams, build_bvh, frozen_bvh, v
 from engine.bvh_wide import collapse
 from engine.layout import BVH_WIDTHS
 
-__all__ = ["cached_bvh", "clear_memory_cache"]
+__all__ = ["cached_bvh", "clear_memory_cache", "default_cache_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +33,7 @@ def clear_memory_cache() -> None:
     _MEMORY_CACHE.clear()
 
 
-def _default_cache_dir() -> Path:
+def default_cache_dir() -> Path:
     """``$ABERRANT_CACHE_DIR`` or ``~/.cache/aberrant``."""
     env = os.environ.get("ABERRANT_CACHE_DIR")
     return Path(env) if env else Path.home() / ".cache" / "aberrant"
@@ -96,7 +96,7 @@ def cached_bvh(
     hit = _MEMORY_CACHE.get(key)
     if hit is not None:
         return hit
-    path = Path(cache_dir if cache_dir is not None else _default_cache_dir()) / "bvh" / f"{key}.npz"
+    path = Path(cache_dir if cache_dir is not None else default_cache_dir()) / "bvh" / f"{key}.npz"
     bvh: Bvh | None = None
     if path.exists():
         try:

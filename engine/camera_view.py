@@ -46,13 +46,19 @@ class CameraView:
         corners = self.corner_directions(aspect)
         return corners.min(axis=0), corners.max(axis=0)
 
-    def primary_directions(self, width: int, height: int) -> np.ndarray:
-        """Unit world directions (H, W, 3), float64, exactly as docs/semantics.md, "Primary rays", says."""
+    def primary_directions(self, width: int, height: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+        """Unit world directions (H, W, 3), float64, exactly as docs/semantics.md, "Primary rays", says.
+
+        ``rows`` (first, end): only those rows of the image, the same numbers as in the whole (a tracer
+        working through a big frame a band at a time).
+        """
         aspect = width / height
         t = math.tan(math.radians(self.fov_deg) / 2.0)
         x = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * aspect * t
         y = (1.0 - 2.0 * (np.arange(height) + 0.5) / height) * t
-        local = np.empty((height, width, 3))
+        if rows is not None:
+            y = y[rows[0] : rows[1]]
+        local = np.empty((len(y), width, 3))
         local[..., 0] = x[None, :]
         local[..., 1] = y[:, None]
         local[..., 2] = -1.0

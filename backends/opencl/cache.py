@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from engine.atomic_files import write_atomically
+from engine.bvh_cache import default_cache_dir
 
 #: The record of an entry's verified files (relative path -> SHA-256), beside PoCL's files.
 RECORD = "aberrant-verified.json"
@@ -43,6 +44,8 @@ STALE_TEMP_SECONDS = 3600.0
 _CHECKED = (".bc", ".so")
 _verified: set[str] = set()
 _warned: set[str] = set()
+#: The PoCL cache this process checks and records (``None``: a user's own, or a private temporary one).
+_ours: str | None = None
 
 
 def _warn(message: str) -> None:
@@ -71,41 +74,32 @@ def _private_dir() -> str:
     return path
 
 
-def configure_caches() -> str | None:
-    """Point PoCL's kernel cache at ``$ABERRANT_CACHE_DIR/opencl`` (so CI runs are repeatable), checked.
+def configure_caches() -> str:
+    """Point PoCL's kernel cache at ``$ABERRANT_CACHE_DIR/opencl`` (``~/.cache/aberrant`` by default, like
+    the BVH cache; so CI runs are repeatable), checked.
 
     Must run before PoCL is first initialised (the first platform query of the
-    process); a user's own ``POCL_CACHE_DIR`` wins. Returns the directory for
+    process); a user's own ``POCL_CACHE_DIR`` wins, and is left to them (not
+    checked: other programs' kernels may share it). Returns the directory for
     pyopencl's compiler cache (which has no environment variable: it is passed
-    to each build), or ``None`` to keep pyopencl's default. An unusable
-    directory is replaced by a private temporary one, with a warning.
+    to each build). An unusable directory is replaced by a private temporary
+    one, with a warning.
     """
-    root = os.environ.get("ABERRANT_CACHE_DIR")
-    if not root:
-        verify_once(pocl_cache_dir())
-        return None
-    base = os.path.join(root, "opencl")
+    global _ours
+    base = os.path.join(str(default_cache_dir()), "opencl")
     pocl = os.environ.setdefault("POCL_CACHE_DIR", os.path.join(base, "pocl"))
-    pyopencl_dir = os.path.join(base, "pyopencl")
-    if pocl.startswith(base + os.sep):  # ours: checked; a user's own POCL_CACHE_DIR is left to them
-        reason = _unusable(pocl)
-        if reason is not None:
-            private = _private_dir()
-            _warn(f"the OpenCL kernel cache {pocl} cannot be used ({reason}); compiling into {private} instead")
-            os.environ["POCL_CACHE_DIR"] = os.path.join(private, "pocl")
-            os.makedirs(os.environ["POCL_CACHE_DIR"], exist_ok=True)
-            return os.path.join(private, "pyopencl")
-    verify_once(pocl_cache_dir())
-    return pyopencl_dir
-
-
-def pocl_cache_dir() -> str:
-    """Where PoCL keeps its kernels: ``$POCL_CACHE_DIR``, else ``$XDG_CACHE_HOME/pocl/kcache`` or ``~/.cache/...``."""
-    explicit = os.environ.get("POCL_CACHE_DIR")
-    if explicit:
-        return explicit
-    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(home, "pocl", "kcache")
+    if not pocl.startswith(base + os.sep):
+        return os.path.join(base, "pyopencl")
+    reason = _unusable(pocl)
+    if reason is not None:
+        private = _private_dir()
+        _warn(f"the OpenCL kernel cache {pocl} cannot be used ({reason}); compiling into {private} instead")
+        os.environ["POCL_CACHE_DIR"] = os.path.join(private, "pocl")
+        os.makedirs(os.environ["POCL_CACHE_DIR"], exist_ok=True)
+        return os.path.join(private, "pyopencl")
+    _ours = pocl
+    verify_once(pocl)
+    return os.path.join(base, "pyopencl")
 
 
 # --- in this process ----------------------------------------------------------------------------
@@ -342,23 +336,25 @@ def record(root: str | os.PathLike[str]) -> None:
 _recorded: set[Hashable] = set()
 
 
-def record_once(root: str | os.PathLike[str], ran: Hashable) -> None:
-    """:func:`record` after the first frame of each program and work-group shape ``ran`` in this process
-    (PoCL writes a shape's code when it first runs: that frame is what proves the files good)."""
-    if ran not in _recorded:
+def record_once(ran: Hashable) -> None:
+    """:func:`record` our cache after the first frame of each program and work-group shape ``ran`` in this
+    process (PoCL writes a shape's code when it first runs: that frame is what proves the files good)."""
+    if ran not in _recorded and _ours is not None:
         _recorded.add(ran)
-        record(root)
+        record(_ours)
 
 
-def forget_touched(root: str | os.PathLike[str], since: float) -> list[Path]:
+def forget_touched(since: float) -> list[Path]:
     """Remove the cache entries PoCL used or wrote since ``since`` (a build from them failed); returns them.
 
     PoCL stamps ``last_accessed`` in an entry on every use, so these are the
     entries the failed build read. An entry holding only a build log (a real
     compile error) is no cache hit and is kept.
     """
-    removed = []
-    for entry in _entries(Path(root)):
+    removed: list[Path] = []
+    if _ours is None:
+        return removed
+    for entry in _entries(Path(_ours)):
         try:
             touched = max(p.stat().st_mtime for p in [entry, *entry.iterdir()])
         except (OSError, ValueError):

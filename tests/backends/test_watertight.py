@@ -128,6 +128,7 @@ def test_grid_cube_exact_rays_through_vertices_and_edges(tmp_path):
     """Dyadic geometry and dyadic rays: every ray passes *exactly* through a vertex or an edge."""
     n = 8
     scene, _ = mesh_scene(tmp_path, grid_cube(n))
+    scene.set_camera((0.0, 0.0, 0.0), look_at=(0.0, 0.0, -1.0))  # the tables (camera-relative) are then in world units
     geo = upload(scene).geometry
     grid = np.arange(n + 1) / n - 0.5
     half = grid[:-1] + 0.5 / n

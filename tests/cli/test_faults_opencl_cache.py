@@ -204,7 +204,6 @@ def test_a_build_that_fails_from_a_cache_entry_removes_it_and_tries_again(monkey
     entry = tmp_path / "pocl" / "AB" / "CDEF"
     entry.mkdir(parents=True)
     (entry / "program.bc").write_bytes(b"BC\xc0\xde")
-    monkeypatch.setenv("POCL_CACHE_DIR", str(tmp_path / "pocl"))
     real_build = cl.Program.build
     calls: list[int] = []
 
@@ -216,6 +215,7 @@ def test_a_build_that_fails_from_a_cache_entry_removes_it_and_tries_again(monkey
 
     monkeypatch.setattr(cl.Program, "build", build)
     backend = OpenClBackend()
+    monkeypatch.setattr(cache, "_ours", str(tmp_path / "pocl"))  # the cache this process checks
     try:
         kernel = backend._build("__kernel void trace(__global int *x) { x[0] = 1; }")
     finally:
