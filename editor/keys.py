@@ -15,6 +15,7 @@ from imgui_bundle import imgui
 
 #: Key words in labels that are not the imgui key's own name (lowercased).
 _KEY_NAMES = {"del": "delete", "esc": "escape", "ctrl": "mod_ctrl", "shift": "mod_shift"}
+_KEY_NAMES.update({arrow: f"{arrow}_arrow" for arrow in ("up", "down", "left", "right")})
 _MODIFIERS = ("ctrl", "shift")
 
 
@@ -99,6 +100,25 @@ COMMANDS = {
     "rename": Binding("F2", "rename the selection"),
     "play": Binding("F5", "play"),
     "help": Binding("F1", "show or hide this help"),
+}
+
+#: ``aberrant play``: the player window (keyboard alone is enough: the arrows turn).
+PLAYER = {
+    "forward": Binding("W / Up", "forward"),
+    "back": Binding("S / Down", "back"),
+    "left": Binding("A", "step left"),
+    "right": Binding("D", "step right"),
+    "turn_left": Binding("Left", "turn left"),
+    "turn_right": Binding("Right", "turn right"),
+    "look_up": Binding("Page Up", "look up"),
+    "look_down": Binding("Page Down", "look down"),
+    "look": Binding("Mouse", "look around", mouse=True),
+    "up": Binding("Space / E", "fly up"),
+    "down": Binding("Q / Left Ctrl", "fly down"),
+    "sprint": Binding("Shift", "run"),
+    "mode": Binding("Tab", "walk or fly"),
+    "fullscreen": Binding("F11", "fullscreen or window"),
+    "quit": Binding("Esc", "quit"),
 }
 
 #: The help overlay's sections, in order.

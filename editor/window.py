@@ -53,11 +53,31 @@ class EditorUnavailable(AberrantError):
     """The editor cannot open a window here (no display, no OpenGL 3.3)."""
 
 
-def display_problem() -> str | None:
+def display_problem(command: str = "editor") -> str | None:
     """Why no window can open here (no $DISPLAY or $WAYLAND_DISPLAY on Linux), or None."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        return "the editor needs a display (no $DISPLAY); run it under a desktop session or `xvfb-run aberrant editor`"
+        return (
+            f"the {command} needs a display (no $DISPLAY); run it under a desktop session or `xvfb-run aberrant "
+            f"{'play' if command == 'player' else command}`"
+        )
     return None
+
+
+def create_gl_window(size: tuple[int, int], title: str) -> Window:
+    """A glfw window with an OpenGL 4.3 core context (the GLSL tracer's compute shaders), else 3.3."""
+    import glfw
+
+    for major, minor in ((4, 3), (3, 3)):
+        glfw.default_window_hints()
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+        window = glfw.create_window(size[0], size[1], title, None, None)
+        if window:
+            return window
+    glfw.terminate()
+    raise EditorUnavailable("a window needs OpenGL 3.3 or newer, and no such window could be created")
 
 
 class EditorWindow:
@@ -77,7 +97,7 @@ class EditorWindow:
                 f"the editor needs a display: glfw cannot start{detail}; try `xvfb-run aberrant editor`"
             )
         self.glfw = glfw
-        self.window = self._create_window(size)
+        self.window = create_gl_window(size, "aberrant editor")
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)  # an idle editor waits for the display instead of spinning
         try:
@@ -117,20 +137,6 @@ class EditorWindow:
         self.idle_wait_s = IDLE_WAIT_S
         #: Frames in a row with no input, no play tick and no new image; from SETTLE_FRAMES on the loop sleeps.
         self.still_frames = 0
-
-    def _create_window(self, size: tuple[int, int]) -> Window:
-        glfw = self.glfw
-        for major, minor in ((4, 3), (3, 3)):  # 4.3 for the GLSL tracer's compute shaders; 3.3 runs the rest
-            glfw.default_window_hints()
-            glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
-            glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
-            glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-            glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-            window = glfw.create_window(size[0], size[1], "aberrant editor", None, None)
-            if window:
-                return window
-        glfw.terminate()
-        raise EditorUnavailable("the editor needs OpenGL 3.3 or newer, and no such window could be created")
 
     def _load_font(self) -> None:
         import imgui_bundle

@@ -86,6 +86,14 @@ class Walker:
     def of(cls, scene: Scene, body: Body | None = None) -> Walker:
         return cls(scene, body or Body(), Probe(scene))
 
+    def ground_below(self) -> bool:
+        """Whether the ray straight down from the eye meets a mesh (else walking would fall for ever)."""
+        entity = self.scene.camera_entity
+        if entity is None:
+            return False
+        eye = np.asarray(self.scene.get(entity, Transform).position, dtype=np.float64)
+        return bool(np.isfinite(self.probe.distances(eye, DOWN[None])[0]))
+
     def step(self, dt: float, state: InputState) -> None:
         """Turn, walk and fall for ``dt`` seconds of ``state``'s input."""
         entity = self.scene.camera_entity

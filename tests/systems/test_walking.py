@@ -112,3 +112,12 @@ def test_a_compressed_corridor_is_walked_as_it_looks(scenes):
     assert eye[2] == pytest.approx(-1.5, abs=0.02)
     _, eye = run(scene, FORWARD, 3.0)  # the wall stops you 0.3 m (as seen) short of it: 0.15 m of world
     assert eye[2] == pytest.approx(-4.0 + 0.15, abs=0.02)
+
+
+def test_ground_below_says_whether_walking_has_a_floor(scenes):
+    scenes.append(scene := room())
+    walker = Walker.of(scene)
+    assert walker.ground_below()
+    scene.set_camera((100.0, 3.0, 0.0), look_at=(100.0, 3.0, -1.0))
+    assert not walker.ground_below()
+    walker.close()
