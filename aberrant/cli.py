@@ -266,6 +266,26 @@ def cmd_editor(args: argparse.Namespace) -> int:
         raise UsageError(str(e)) from None
 
 
+def cmd_play(args: argparse.Namespace) -> int:
+    """``play``: walk (or fly through) a level in a window with no panels (needs a display and the editor extra)."""
+    try:
+        from editor.player import DEFAULT_SIZE, run_player
+        from editor.window import EditorUnavailable, display_problem
+    except ImportError as e:
+        raise UsageError(f"the player needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
+    size = parse_size(args.size) if args.size is not None else DEFAULT_SIZE
+    problem = display_problem("player")
+    if problem is not None:
+        raise UsageError(problem)
+    from aberrant.levels import open_level
+
+    with open_level(args.scene) as level:
+        try:
+            return run_player(level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames)
+        except EditorUnavailable as e:
+            raise UsageError(str(e)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog=PROG, description="Ray trace triangle-mesh scenes in deformed space.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
@@ -358,6 +378,14 @@ def build_parser() -> argparse.ArgumentParser:
     editor.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
     editor.add_argument("--size", default=None, help="window WIDTHxHEIGHT (default 1600x900; the window is resizable)")
     editor.set_defaults(func=cmd_editor)
+
+    play = sub.add_parser("play", help="walk a level in a window (WASD or arrows, mouse; Tab flies, F11 fullscreen)")
+    play.add_argument("scene", metavar="SCENE", help=LEVEL_HELP)
+    play.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
+    play.add_argument("--size", default=None, help="window WIDTHxHEIGHT (default 1280x720)")
+    play.add_argument("--fly", action="store_true", help="start flying instead of walking")
+    play.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)  # tests: quit after N frames
+    play.set_defaults(func=cmd_play)
     return parser
 
 

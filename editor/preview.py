@@ -233,6 +233,10 @@ class PreviewRenderer:
         self._fbo: moderngl.Framebuffer | None = None
         self._line_buffer: moderngl.Buffer | None = None
         self.size = (0, 0)
+        #: What the framebuffer holds (scene, journal position, view, size, shading, selection): unchanged, no redraw.
+        self._key: tuple[object, ...] | None = None
+        #: Preview passes drawn (a still scene draws one).
+        self.renders = 0
 
     def _target(self, size: tuple[int, int]) -> moderngl.Framebuffer:
         if self._fbo is None or self.size != size:
@@ -240,6 +244,7 @@ class PreviewRenderer:
                 for attachment in (*self._fbo.color_attachments, self._fbo.depth_attachment):
                     attachment.release()
                 self._fbo.release()
+            self._key = None
             color = self.ctx.texture(size, 4)
             depth = self.ctx.depth_renderbuffer(size)
             self._fbo = self.ctx.framebuffer([color], depth)
@@ -270,11 +275,19 @@ class PreviewRenderer:
     def render(
         self, scene: Scene, view: CameraView, size: tuple[int, int], *, shaded: bool, selected: int | None = None
     ) -> moderngl.Texture:
-        """Meshes (depth only, or flat-shaded), then the depth-tested debug lines; transparent where empty."""
+        """Meshes (depth only, or flat-shaded), then the depth-tested debug lines; transparent where empty.
+
+        The framebuffer is drawn again only when something it shows changed, so a still scene costs nothing.
+        """
         import moderngl
 
         ctx = self.ctx
         fbo = self._target(size)
+        key = (scene.world, scene.cursor, *view.position, *view.rotation.ravel(), view.fov_deg, size, shaded, selected)
+        if key == self._key:
+            return _color_texture(fbo)
+        self._key = key
+        self.renders += 1
         fbo.color_mask = (True,) * 4
         fbo.depth_mask = True
         fbo.use()  # moderngl applies a framebuffer's masks when it is bound

@@ -9,6 +9,7 @@ headless tests drive the very same code with simulated input.
 from __future__ import annotations
 
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ from imgui_bundle import imgui, imguizmo
 
 from components import Camera, Mesh, Transform
 from editor.backend_host import BackendHost
+from editor.keys import COMMANDS, PLAY, help_lines
 from editor.model import EditorModel
 from editor.panels.backend import draw_backend_panel
 from editor.panels.dialogs import FileDialog, draw_discard_prompt
@@ -64,6 +66,8 @@ class EditorUi:
         self.frame_ms = 0.0
         #: Set by the window while the cursor is locked: this frame's mouse motion in pixels.
         self.locked_mouse_delta: tuple[float, float] | None = None
+        #: The key-binding overlay (F1, Help menu).
+        self.show_help = False
 
     # --- state the panels ask for -------------------------------------------------------------
 
@@ -91,6 +95,9 @@ class EditorUi:
 
     def rename_selection(self) -> None:
         self.hierarchy.start_rename(self.model)
+
+    def toggle_help(self) -> None:
+        self.show_help = not self.show_help
 
     # --- dialogs ------------------------------------------------------------------------------
 
@@ -134,7 +141,7 @@ class EditorUi:
             self.model.error(f"cannot play: {e}")
             return False
         self.capture_mouse = True
-        self.model.info("playing: WASD to move, mouse to look, Shift to sprint, Esc to stop")
+        self.model.info(f"playing: WASD to move, mouse to look, Shift to sprint, {PLAY['stop'].label} to stop")
         return True
 
     def stop_play(self) -> None:
@@ -151,7 +158,7 @@ class EditorUi:
         session = self.play
         if session is None:
             return
-        if imgui.is_key_pressed(imgui.Key.escape, False):
+        if PLAY["stop"].pressed():
             self.stop_play()
             return
         keys = play_keys(self.locked_mouse_delta)
@@ -194,6 +201,7 @@ class EditorUi:
             self.show_save_dialog()
         self.files.draw(on_cancel=self.model.cancel_save_as)
         draw_discard_prompt(self.model)
+        self._help_overlay()
         self._shortcuts()
         if not imgui.is_any_item_active() and not imguizmo.im_guizmo.is_using():
             self.model.close_merge()
@@ -232,33 +240,59 @@ class EditorUi:
             imgui.end_menu_bar()
         imgui.end()
 
+    def _on_selection(self, action: Callable[[int], object]) -> None:
+        if self.model.selected is not None:
+            action(self.model.selected)
+
+    def _help_overlay(self) -> None:
+        """The key bindings, from the table the handlers use, in a window over the viewport."""
+        if not self.show_help:
+            return
+        viewport = imgui.get_main_viewport()
+        imgui.set_next_window_pos(viewport.get_center(), imgui.Cond_.always.value, (0.5, 0.5))
+        imgui.set_next_window_bg_alpha(0.9)
+        flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
+        opened, keep = imgui.begin("Keys (F1 closes)", True, flags)
+        self.show_help = bool(keep)
+        if opened and imgui.begin_table("##keys", 2):
+            for keys, does in help_lines():
+                imgui.table_next_row()
+                imgui.table_next_column()
+                if does:
+                    imgui.text(keys)
+                    imgui.table_next_column()
+                    imgui.text_disabled(does)
+                else:
+                    imgui.text_colored(INFO_COLOR, keys)
+            imgui.end_table()
+        imgui.end()
+
     def _shortcuts(self) -> None:
         io = imgui.get_io()
-        if self.playing or io.want_text_input:
+        if io.want_text_input:
             return
-        ctrl, shift = io.key_ctrl, io.key_shift
-        pressed = imgui.is_key_pressed
+        if COMMANDS["help"].pressed():
+            self.toggle_help()
+        if self.playing:
+            return
         model = self.model
-        if ctrl and pressed(imgui.Key.z, False):
-            model.redo() if shift else model.undo()
-        elif ctrl and pressed(imgui.Key.y, False):
-            model.redo()
-        elif ctrl and pressed(imgui.Key.s, False):
-            self.show_save_dialog() if shift else model.save()
-        elif ctrl and pressed(imgui.Key.o, False):
-            self.show_open_dialog()
-        elif ctrl and pressed(imgui.Key.n, False):
-            model.request("new")
-        elif ctrl and pressed(imgui.Key.q, False):
-            self.request_quit()
-        elif ctrl and pressed(imgui.Key.d, False) and model.selected is not None:
-            model.duplicate(model.selected)
-        elif pressed(imgui.Key.delete, False) and model.selected is not None:
-            model.delete(model.selected)
-        elif pressed(imgui.Key.f2, False):
-            self.rename_selection()
-        elif pressed(imgui.Key.f5, False):
-            self.start_play()
+        actions: dict[str, Callable[[], object]] = {
+            "undo": model.undo,
+            "redo": model.redo,
+            "save": model.save,
+            "save_as": self.show_save_dialog,
+            "open": self.show_open_dialog,
+            "new": lambda: model.request("new"),
+            "quit": self.request_quit,
+            "duplicate": lambda: self._on_selection(model.duplicate),
+            "delete": lambda: self._on_selection(model.delete),
+            "rename": self.rename_selection,
+            "play": self.start_play,
+        }
+        for name, action in actions.items():
+            if COMMANDS[name].pressed():
+                action()
+                return
 
     def close(self) -> None:
         self.stop_play()

@@ -43,17 +43,41 @@ PREFERRED_BACKENDS = ("glsl", "opencl", "reference")
 DEFAULT_SIZE = (1600, 900)
 FONT = "DroidSans.ttf"
 FONT_SIZE = 16.0
+#: Longest sleep of a still editor on the event queue (it then looks again; nothing is drawn without an event).
+IDLE_WAIT_S = 0.5
+#: Frames drawn after the last input or new image before the loop sleeps (imgui settles hover and layout over a few).
+SETTLE_FRAMES = 3
 
 
 class EditorUnavailable(AberrantError):
     """The editor cannot open a window here (no display, no OpenGL 3.3)."""
 
 
-def display_problem() -> str | None:
+def display_problem(command: str = "editor") -> str | None:
     """Why no window can open here (no $DISPLAY or $WAYLAND_DISPLAY on Linux), or None."""
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        return "the editor needs a display (no $DISPLAY); run it under a desktop session or `xvfb-run aberrant editor`"
+        return (
+            f"the {command} needs a display (no $DISPLAY); run it under a desktop session or `xvfb-run aberrant "
+            f"{'play' if command == 'player' else command}`"
+        )
     return None
+
+
+def create_gl_window(size: tuple[int, int], title: str) -> Window:
+    """A glfw window with an OpenGL 4.3 core context (the GLSL tracer's compute shaders), else 3.3."""
+    import glfw
+
+    for major, minor in ((4, 3), (3, 3)):
+        glfw.default_window_hints()
+        glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
+        glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
+        glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
+        glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
+        window = glfw.create_window(size[0], size[1], title, None, None)
+        if window:
+            return window
+    glfw.terminate()
+    raise EditorUnavailable("a window needs OpenGL 3.3 or newer, and no such window could be created")
 
 
 class EditorWindow:
@@ -73,7 +97,7 @@ class EditorWindow:
                 f"the editor needs a display: glfw cannot start{detail}; try `xvfb-run aberrant editor`"
             )
         self.glfw = glfw
-        self.window = self._create_window(size)
+        self.window = create_gl_window(size, "aberrant editor")
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)  # an idle editor waits for the display instead of spinning
         try:
@@ -89,6 +113,9 @@ class EditorWindow:
         io.config_error_recovery_enable_assert = False  # EditorUi.safe_draw recovers and reports instead
         self._load_font()
         imgui.style_colors_dark()
+        #: glfw events seen (input, resize, focus, expose): a still editor sleeps until the next one.
+        self.events = 0
+        self._count_events()  # before imgui's callbacks, which chain to these
         address = ctypes.cast(self.window, ctypes.c_void_p).value
         assert address is not None  # a window glfw created is never the null pointer
         imgui.backends.glfw_init_for_opengl(address, True)
@@ -107,20 +134,9 @@ class EditorWindow:
         self._cursor: tuple[float, float] | None = None
         self.last_frame_ms = 0.0
         self._last = time.perf_counter()
-
-    def _create_window(self, size: tuple[int, int]) -> Window:
-        glfw = self.glfw
-        for major, minor in ((4, 3), (3, 3)):  # 4.3 for the GLSL tracer's compute shaders; 3.3 runs the rest
-            glfw.default_window_hints()
-            glfw.window_hint(glfw.CONTEXT_VERSION_MAJOR, major)
-            glfw.window_hint(glfw.CONTEXT_VERSION_MINOR, minor)
-            glfw.window_hint(glfw.OPENGL_PROFILE, glfw.OPENGL_CORE_PROFILE)
-            glfw.window_hint(glfw.OPENGL_FORWARD_COMPAT, True)
-            window = glfw.create_window(size[0], size[1], "aberrant editor", None, None)
-            if window:
-                return window
-        glfw.terminate()
-        raise EditorUnavailable("the editor needs OpenGL 3.3 or newer, and no such window could be created")
+        self.idle_wait_s = IDLE_WAIT_S
+        #: Frames in a row with no input, no play tick and no new image; from SETTLE_FRAMES on the loop sleeps.
+        self.still_frames = 0
 
     def _load_font(self) -> None:
         import imgui_bundle
@@ -130,6 +146,27 @@ class EditorWindow:
             imgui.get_io().fonts.add_font_from_file_ttf(str(font), FONT_SIZE)
 
     # --- glfw callbacks ----------------------------------------------------------------------
+
+    def _count_events(self) -> None:
+        glfw = self.glfw
+
+        def seen(*_: object) -> None:
+            self.events += 1
+
+        for install in (
+            glfw.set_cursor_pos_callback,
+            glfw.set_cursor_enter_callback,
+            glfw.set_mouse_button_callback,
+            glfw.set_scroll_callback,
+            glfw.set_key_callback,
+            glfw.set_char_callback,
+            glfw.set_window_size_callback,
+            glfw.set_framebuffer_size_callback,
+            glfw.set_window_focus_callback,
+            glfw.set_window_refresh_callback,
+            glfw.set_drop_callback,
+        ):
+            install(self.window, seen)
 
     def _on_close(self, window: Window) -> None:
         """The window's close button: with unsaved changes, ask first."""
@@ -224,13 +261,32 @@ class EditorWindow:
         pixels = np.frombuffer(data, np.uint8).reshape(height, width, 3)[::-1]
         PilImage.fromarray(pixels).save(path)
 
+    @property
+    def busy(self) -> bool:
+        """Whether the next frame may look different without new input: play ticks, typing, a drag, a new image."""
+        io = imgui.get_io()
+        held = any(imgui.is_mouse_down(button) for button in range(3))
+        return self.ui.playing or io.want_text_input or held or self.still_frames < SETTLE_FRAMES
+
     def run(self, frames: int | None = None, screenshot: Path | None = None) -> None:
-        """Loop until the window closes, or for ``frames`` frames (the last one saved to ``screenshot``)."""
+        """Loop until the window closes, or for ``frames`` iterations (the last drawn and saved to ``screenshot``).
+
+        A still editor sleeps on glfw's event queue and draws nothing until an event arrives (the window keeps
+        showing its last frame); the tracer and the preview redraw only when their image would change.
+        """
         count = 0
         while not self.glfw.window_should_close(self.window):
             count += 1
             last = frames is not None and count >= frames
+            before = (self.events, self.host.frames, self.preview.renders)
+            if not self.busy:
+                self.glfw.wait_events_timeout(self.idle_wait_s)
+                if self.events == before[0] and not last:
+                    self.still_frames += 1
+                    continue
             self.frame(screenshot if last else None)
+            still = before == (self.events, self.host.frames, self.preview.renders)
+            self.still_frames = self.still_frames + 1 if still else 0
             if last:
                 break
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from imgui_bundle import imgui
 
 from demos import demo_names, describe
+from editor.keys import COMMANDS, NAVIGATION, PLAY
 from editor.panels import widgets as ui
 from editor.panels.shell import EditorShell
 from editor.panels.viewport import ViewportPanel
@@ -19,10 +20,14 @@ def draw_main_menu(shell: EditorShell, viewport: ViewportPanel) -> None:
     _edit_menu(shell)
     _add_menu(shell)
     _view_menu(shell, viewport)
+    if ui.begin_menu("Help"):
+        if ui.menu_item("Keys", COMMANDS["help"].label, True, shell.show_help):
+            shell.toggle_help()
+        imgui.end_menu()
     if shell.playing:
-        if ui.menu_item("Stop", "Esc"):
+        if ui.menu_item("Stop", PLAY["stop"].label):
             shell.stop_play()
-    elif ui.menu_item("Play", "F5"):
+    elif ui.menu_item("Play", COMMANDS["play"].label):
         shell.start_play()
     imgui.end_main_menu_bar()
 
@@ -32,9 +37,9 @@ def _file_menu(shell: EditorShell) -> None:
         return
     model = shell.model
     editing = not shell.playing
-    if ui.menu_item("New", "Ctrl+N", editing):
+    if ui.menu_item("New", COMMANDS["new"].label, editing):
         model.request("new")
-    if ui.menu_item("Open...", "Ctrl+O", editing):
+    if ui.menu_item("Open...", COMMANDS["open"].label, editing):
         shell.show_open_dialog()
     if ui.begin_menu("Open demo", editing):
         for name in demo_names():
@@ -43,12 +48,12 @@ def _file_menu(shell: EditorShell) -> None:
             ui.tooltip(describe(name))
         imgui.end_menu()
     imgui.separator()
-    if ui.menu_item("Save", "Ctrl+S", editing):
+    if ui.menu_item("Save", COMMANDS["save"].label, editing):
         model.save()
-    if ui.menu_item("Save as...", "Ctrl+Shift+S", editing):
+    if ui.menu_item("Save as...", COMMANDS["save_as"].label, editing):
         shell.show_save_dialog()
     imgui.separator()
-    if ui.menu_item("Quit", "Ctrl+Q"):
+    if ui.menu_item("Quit", COMMANDS["quit"].label):
         shell.request_quit()
     imgui.end_menu()
 
@@ -60,18 +65,18 @@ def _edit_menu(shell: EditorShell) -> None:
     editing = not shell.playing
     top = model.undo_stack[-1].label if model.undo_stack else ""
     after = model.redo_stack[-1].label if model.redo_stack else ""
-    if ui.menu_item(f"Undo {top}###Undo", "Ctrl+Z", editing and model.can_undo):
+    if ui.menu_item(f"Undo {top}###Undo", COMMANDS["undo"].label, editing and model.can_undo):
         model.undo()
-    if ui.menu_item(f"Redo {after}###Redo", "Ctrl+Y", editing and model.can_redo):
+    if ui.menu_item(f"Redo {after}###Redo", COMMANDS["redo"].label, editing and model.can_redo):
         model.redo()
     imgui.separator()
     entity = model.selected
     has = editing and entity is not None
-    if ui.menu_item("Rename##edit", "F2", has):
+    if ui.menu_item("Rename##edit", COMMANDS["rename"].label, has):
         shell.rename_selection()
-    if ui.menu_item("Duplicate##edit", "Ctrl+D", has) and entity is not None:
+    if ui.menu_item("Duplicate##edit", COMMANDS["duplicate"].label, has) and entity is not None:
         model.duplicate(entity)
-    if ui.menu_item("Delete##edit", "Del", has) and entity is not None:
+    if ui.menu_item("Delete##edit", COMMANDS["delete"].label, has) and entity is not None:
         model.delete(entity)
     imgui.end_menu()
 
@@ -106,7 +111,7 @@ def _add_menu(shell: EditorShell) -> None:
 def _view_menu(shell: EditorShell, viewport: ViewportPanel) -> None:
     if not ui.begin_menu("View"):
         return
-    if ui.menu_item("Frame selection", "F", shell.model.selected is not None):
+    if ui.menu_item("Frame selection", NAVIGATION["focus"].label, shell.model.selected is not None):
         shell.focus_selection()
     if ui.menu_item("View from scene camera", "", shell.model.scene.camera_entity is not None):
         shell.view_from_camera()

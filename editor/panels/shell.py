@@ -21,6 +21,7 @@ class EditorShell(Protocol):
     model: EditorModel
     view: EditorView
     play: PlaySession | None
+    show_help: bool
 
     @property
     def playing(self) -> bool: ...
@@ -36,6 +37,8 @@ class EditorShell(Protocol):
     def view_from_camera(self) -> None: ...
 
     def rename_selection(self) -> None: ...
+
+    def toggle_help(self) -> None: ...
 
     def show_open_dialog(self) -> None: ...
 

@@ -1,10 +1,10 @@
 """The viewport: the traced frame with the preview lines on top, the gizmo, and the mouse/keyboard controls.
 
-Edit mode: hold the right mouse button to look around and fly with WASD
-(Q/E down/up, Shift faster), wheel to move forward, middle button to pan,
-left click to select, F to frame the selection; W/E/R pick the gizmo's
-translate/rotate/scale. Play mode: WASD and mouse look drive the played
-camera through the real systems, Shift sprints, Esc stops.
+Edit mode: the right mouse button looks around and flies with the keys,
+the wheel moves, the middle button pans, a left click selects; the gizmo's
+keys pick move, rotate or scale. Play mode: the keys and mouse look drive
+the played camera through the real systems. The keys are in
+:mod:`editor.keys` (F1 shows them).
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from imgui_bundle import imgui, imguizmo
 
 from components import Transform
 from editor.gizmo import MODES, OPERATIONS, GizmoSettings, matrix_to_transform, transform_matrix
+from editor.keys import GIZMO, NAVIGATION, PLAY
 from editor.panels import widgets as ui
 from editor.panels.shell import EditorShell
 from editor.picking import pick
@@ -54,18 +55,17 @@ def play_keys(mouse_delta: tuple[float, float] | None = None) -> Keys:
     imgui's glfw backend reports no mouse position, so the window measures it.
     """
     io = imgui.get_io()
-    down = imgui.is_key_down
     if mouse_delta is None:
         valid = io.mouse_delta.x > -1e6 and io.mouse_delta.y > -1e6 and imgui.is_mouse_pos_valid()
         mouse_delta = (io.mouse_delta.x, io.mouse_delta.y) if valid else (0.0, 0.0)
     return Keys(
-        forward=down(imgui.Key.w),
-        back=down(imgui.Key.s),
-        left=down(imgui.Key.a),
-        right=down(imgui.Key.d),
-        up=down(imgui.Key.space) or down(imgui.Key.e),
-        down=down(imgui.Key.q) or down(imgui.Key.left_ctrl),
-        sprint=io.key_shift,
+        forward=PLAY["forward"].down(),
+        back=PLAY["back"].down(),
+        left=PLAY["left"].down(),
+        right=PLAY["right"].down(),
+        up=PLAY["up"].down(),
+        down=PLAY["down"].down(),
+        sprint=PLAY["sprint"].down(),
         mouse_dx=mouse_delta[0],
         mouse_dy=mouse_delta[1],
     )
@@ -170,7 +170,8 @@ class ViewportPanel:
         session = shell.play
         if session is None:
             return
-        text = f"PLAY  {session.elapsed:6.1f} s  WASD move, mouse look, Shift sprint, Esc stop"
+        stop = PLAY["stop"].label
+        text = f"PLAY  {session.elapsed:6.1f} s  WASD move, mouse look, Shift sprint, {stop} stop, F1 keys"
         draw_list = imgui.get_window_draw_list()
         lines = [(text, (1.0, 0.85, 0.3, 1.0))]
         if session.error:
@@ -190,25 +191,25 @@ class ViewportPanel:
         view = shell.view
         if self._held[1]:
             view.look(io.mouse_delta.x * LOOK_SENSITIVITY, -io.mouse_delta.y * LOOK_SENSITIVITY)
-            down = imgui.is_key_down
+            nav = NAVIGATION
             move = (
-                float(down(imgui.Key.d)) - float(down(imgui.Key.a)),
-                float(down(imgui.Key.e)) - float(down(imgui.Key.q)),
-                float(down(imgui.Key.s)) - float(down(imgui.Key.w)),
+                float(nav["right"].down()) - float(nav["left"].down()),
+                float(nav["up"].down()) - float(nav["down"].down()),
+                float(nav["back"].down()) - float(nav["forward"].down()),
             )
-            view.fly(move, io.delta_time, boost=io.key_shift)
+            view.fly(move, io.delta_time, boost=nav["boost"].down())
             self._moving = True
         elif self._held[2]:
             scale = 0.01 * max(1.0, float(np.linalg.norm(view.position)) * 0.1)
             view.pan(-io.mouse_delta.x * scale, io.mouse_delta.y * scale)
             self._moving = True
         elif self.hovered and io.mouse_wheel != 0.0:
-            view.fly((0.0, 0.0, -1.0), 0.25 * io.mouse_wheel, boost=io.key_shift)
+            view.fly((0.0, 0.0, -1.0), 0.25 * io.mouse_wheel, boost=NAVIGATION["boost"].down())
         if self.hovered and not imgui.is_mouse_down(1) and not io.want_text_input:
-            for key, op in ((imgui.Key.w, "translate"), (imgui.Key.e, "rotate"), (imgui.Key.r, "scale")):
-                if imgui.is_key_pressed(key, False):
+            for op, binding in GIZMO.items():
+                if binding.pressed():
                     self.gizmo.operation = op
-            if imgui.is_key_pressed(imgui.Key.f, False):
+            if NAVIGATION["focus"].pressed():
                 shell.focus_selection()
 
     def _pick(self, shell: EditorShell) -> None:

@@ -292,3 +292,51 @@ def test_an_error_in_a_panel_is_reported_not_fatal(h, monkeypatch, capsys):
     h.menu("Add", "Aberration")
     assert "aberration" in names(h.model)
     capsys.readouterr()
+
+
+def test_f1_and_the_help_menu_show_the_key_table(h):
+    from editor.keys import help_lines
+
+    assert not h.ui.show_help
+    h.key(imgui.Key.f1)
+    assert h.ui.show_help
+    h.frames(2)
+    h.key(imgui.Key.f1)
+    assert not h.ui.show_help
+    h.menu("Help", "Keys")
+    assert h.ui.show_help
+    rows = dict(help_lines())
+    assert rows["W"] and rows["Ctrl+Shift+Z / Ctrl+Y"] == "redo" and rows["F1"].startswith("show or hide")
+
+
+def test_every_key_in_the_help_parses_and_the_handlers_act_on_them(h):
+    from editor.keys import GIZMO, SECTIONS
+
+    for bindings in SECTIONS.values():
+        for binding in bindings.values():
+            assert binding.mouse or binding.chords  # a keyboard label that names no imgui key fails here
+    x, y = ITEMS.center("viewport")
+    h.gui.move(x, y, h.draw)
+    for operation, binding in reversed(GIZMO.items()):
+        ((_, key),) = binding.chords
+        h.key(key)
+        assert h.ui.viewport.gizmo.operation == operation
+    before = len(names(h.model))
+    h.model.select(h.model.scene.entities()[0])
+    h.key(imgui.Key.d, ctrl=True)
+    assert len(names(h.model)) == before + 1
+    h.key(imgui.Key.z, ctrl=True, shift=False)
+    assert len(names(h.model)) == before
+    h.key(imgui.Key.z, ctrl=True, shift=True)  # redo, not undo: modifiers match exactly
+    assert len(names(h.model)) == before + 1
+
+
+def test_the_readme_lists_every_key_binding():
+    from editor.keys import SECTIONS
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text(encoding="utf-8")
+    section = readme[readme.index("## Editor") :]
+    section = section[: section.index("\n## ", 1)]
+    for bindings in SECTIONS.values():
+        for binding in bindings.values():
+            assert f"`{binding.label}` {binding.does}" in section

@@ -46,6 +46,16 @@ report = {
     "origin": list(ui.viewport.origin), "size": list(ui.viewport.size),
     "traced_size": [host.last_frame.width, host.last_frame.height] if host.last_frame else None,
 }
+if args["idle"]:
+    window.idle_wait_s = 0.2
+    still = (host.frames, window.preview.renders)
+    cpu = time.process_time()
+    window.run(frames=args["idle"])
+    report["idle_cpu_s"] = time.process_time() - cpu
+    report["idle"] = [host.frames - still[0], window.preview.renders - still[1], window.still_frames]
+    ui.view.position[0] += 0.25
+    window.run(frames=1)
+    report["moved"] = [host.frames - still[0], window.preview.renders - still[1]]
 if args["play"]:
     from imgui_bundle import imgui
     from engine.scene_file import scene_to_json
@@ -115,11 +125,19 @@ def display():
 
 
 def run_editor(
-    display: str, shot: Path, *, overlays: bool, backend: str | None = "glsl", frames=4, bench=0, play=None
+    display: str,
+    shot: Path,
+    *,
+    overlays: bool,
+    backend: str | None = "glsl",
+    frames=4,
+    bench=0,
+    play=None,
+    idle=0,
 ) -> dict:
     env = {**os.environ, "DISPLAY": display}
     args = {"size": SIZE, "frames": frames, "shot": str(shot), "overlays": overlays, "backend": backend}
-    args.update(bench=bench, play=None if play is None else str(play))
+    args.update(bench=bench, play=None if play is None else str(play), idle=idle)
     result = subprocess.run(
         [sys.executable, "-c", SCRIPT, json.dumps(args)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
     )
@@ -192,6 +210,18 @@ def test_editor_window_play_then_stop(display):
     assert report["play_error"] is None and report["play_frames"] > report["traced"]  # the tracer ran in play
     assert report["played"][2] < report["start"][2] - 0.1  # W walked the camera forward (towards -z)
     assert report["stopped"] and report["unchanged"]
+
+
+def test_a_still_editor_traces_once_and_sleeps(display):
+    """No input: the loop sleeps on the event queue and neither the tracer nor the preview draws again;
+    moving the camera traces once more."""
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    report = run_editor(display, ARTIFACTS / "editor_idle.png", overlays=True, backend="reference", frames=6, idle=10)
+    assert report["traced"] >= 1 and report["error"] is None
+    traced, previewed, still = report["idle"]
+    assert traced == 0 and previewed == 0 and still >= 10
+    assert report["moved"] == [1, 1]
+    print(f"10 idle iterations (0.2 s waits): {report['idle_cpu_s'] * 1e3:.0f} ms of CPU")
 
 
 @pytest.mark.benchmark(group="editor")

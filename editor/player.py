@@ -1,0 +1,207 @@
+"""``aberrant play``: a level in a window with no panels, walked (gravity, collision) or flown.
+
+The frame is the tracer's, drawn over the whole window; a line of text over
+it gives the frame rate, the backend and the mode. Walking is
+:class:`systems.walking.Walker`; flying is the tick loop's own camera movement
+(:class:`systems.app.App`), which also teleports, uploads and renders. The
+keys are :data:`editor.keys.PLAYER`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import time
+from collections import deque
+
+from imgui_bundle import imgui  # first: points the glfw module at imgui-bundle's libglfw
+
+from editor.backend_host import BackendHost
+from editor.keys import PLAYER
+from editor.play import Keys, LiveInput, input_state
+from editor.window import PREFERRED_BACKENDS, EditorUnavailable, create_gl_window, display_problem
+from engine.input import NO_INPUT, InputState
+from engine.scene import Scene
+from systems.app import App
+from systems.walking import Walker
+
+DEFAULT_SIZE = (1280, 720)
+#: Degrees a second the arrow keys turn (and Page Up/Down tilt) the view.
+TURN_SPEED = 120.0
+#: Fraction of the window's pixels traced (the image is stretched to fit).
+SCALE = 0.5
+TEXT = (1.0, 0.9, 0.5, 1.0)
+
+
+def player_keys(dt: float, mouse: tuple[float, float]) -> InputState:
+    """This frame's movement from :data:`PLAYER`'s keys, the mouse's motion and the turning keys."""
+    down = {name: binding.down() for name, binding in PLAYER.items() if not binding.mouse}
+    keys = Keys(
+        forward=down["forward"], back=down["back"], left=down["left"], right=down["right"],
+        up=down["up"], down=down["down"], sprint=down["sprint"], mouse_dx=mouse[0], mouse_dy=mouse[1],
+    )  # fmt: skip
+    state = input_state(keys)
+    turn = (float(down["turn_left"]) - float(down["turn_right"])) * TURN_SPEED * dt
+    tilt = (float(down["look_up"]) - float(down["look_down"])) * TURN_SPEED * dt
+    look = (state.look[0] + turn, state.look[1] + tilt)
+    return InputState(move=state.move, look=look, sprint=state.sprint)
+
+
+class PlayerWindow:
+    """A window playing one scene; :meth:`run` loops until Esc or the window closes."""
+
+    def __init__(
+        self, scene: Scene, *, size: tuple[int, int] = DEFAULT_SIZE, backend: str | None = None, fly: bool = False
+    ) -> None:
+        import glfw
+        import moderngl
+
+        problem = display_problem("player")
+        if problem is not None:
+            raise EditorUnavailable(problem)
+        if not glfw.init():
+            raise EditorUnavailable("the player needs a display: glfw cannot start; try `xvfb-run aberrant play`")
+        scene.validate()
+        self.glfw = glfw
+        self.scene = scene
+        self.window = create_gl_window(size, f"aberrant play: {scene.name}")
+        glfw.make_context_current(self.window)
+        glfw.swap_interval(1)
+        try:
+            self.ctx = moderngl.create_context()
+        except Exception as e:
+            glfw.terminate()
+            raise EditorUnavailable(f"the player cannot use the window's OpenGL context: {e}") from None
+        self.imgui_context = imgui.create_context()
+        imgui.get_io().set_ini_filename(None)
+        address = ctypes.cast(self.window, ctypes.c_void_p).value
+        assert address is not None
+        imgui.backends.glfw_init_for_opengl(address, True)
+        imgui.backends.opengl3_init("#version 330")
+        self.errors: list[str] = []
+        self.host = BackendHost(self.ctx, self.errors.append)
+        started = self.host.select(backend) if backend is not None else self.host.select_first(PREFERRED_BACKENDS)
+        if not started or self.host.backend is None:
+            self.close()
+            raise EditorUnavailable(self.host.error or "no tracer backend can start here")
+        self.input = LiveInput()
+        self.app = App(scene, self.host.backend, size=self._trace_size(), aovs=self.host.aovs, input_source=self.input)
+        self.walker = Walker.of(scene)
+        #: Starting over nothing, the player flies (walking would fall for ever) and says so.
+        self.flying = fly or not self.walker.ground_below()
+        self.notice = "" if self.flying == fly else "nothing below to stand on: flying"
+        self.frame_times: deque[float] = deque(maxlen=30)
+        self._windowed: tuple[int, int, int, int] | None = None
+        self._cursor: tuple[float, float] | None = None
+        self._last = time.perf_counter()
+        glfw.set_input_mode(self.window, glfw.CURSOR, glfw.CURSOR_DISABLED)
+
+    def _trace_size(self) -> tuple[int, int]:
+        w, h = self.glfw.get_framebuffer_size(self.window)
+        return max(int(w * SCALE), 8), max(int(h * SCALE), 8)
+
+    def _mouse(self) -> tuple[float, float]:
+        x, y = self.glfw.get_cursor_pos(self.window)
+        last, self._cursor = self._cursor, (x, y)
+        return (0.0, 0.0) if last is None else (x - last[0], y - last[1])
+
+    @property
+    def fps(self) -> float:
+        return len(self.frame_times) / max(sum(self.frame_times), 1e-9) if self.frame_times else 0.0
+
+    def toggle_fullscreen(self) -> None:
+        glfw = self.glfw
+        if self._windowed is None:
+            monitor = glfw.get_primary_monitor()
+            mode = glfw.get_video_mode(monitor) if monitor else None
+            if not monitor or mode is None:
+                return
+            x, y = glfw.get_window_pos(self.window)
+            w, h = glfw.get_window_size(self.window)
+            self._windowed = (x, y, w, h)
+            glfw.set_window_monitor(self.window, monitor, 0, 0, mode.size.width, mode.size.height, mode.refresh_rate)
+        else:
+            x, y, w, h = self._windowed
+            self._windowed = None
+            glfw.set_window_monitor(self.window, None, x, y, w, h, 0)
+
+    def frame(self) -> None:
+        """Input, one tick (walk or fly, teleport, upload, render), the image and its overlay, present."""
+        glfw = self.glfw
+        glfw.poll_events()
+        now = time.perf_counter()
+        dt, self._last = min(now - self._last, 0.1), now
+        self.frame_times.append(dt)
+        imgui.backends.opengl3_new_frame()
+        imgui.backends.glfw_new_frame()
+        imgui.new_frame()
+        if PLAYER["quit"].pressed():
+            glfw.set_window_should_close(self.window, True)
+        if PLAYER["mode"].pressed():
+            self.flying, self.notice = not self.flying, ""
+            self.walker.vertical_speed = 0.0
+        if PLAYER["fullscreen"].pressed():
+            self.toggle_fullscreen()
+        state = player_keys(dt, self._mouse())
+        if self.flying:
+            self.input.state = state
+        else:
+            self.input.state = NO_INPUT
+            self.walker.step(dt, state)
+        self.app.size = self._trace_size()
+        frame = self.app.tick(dt)
+        if frame is not None:
+            self.host.present(frame)
+        width, height = glfw.get_framebuffer_size(self.window)
+        texture = self.host.texture
+        draw = imgui.get_background_draw_list()
+        if texture is not None:
+            draw.add_image(imgui.ImTextureRef(texture.glo), (0, 0), (width, height), (0.0, 0.0), (1.0, 1.0))
+        mode = "fly" if self.flying else "walk"
+        text = f"{self.fps:5.1f} fps  {self.host.name}  {mode} ({PLAYER['mode'].label})  {PLAYER['quit'].label} quits"
+        draw.add_rect_filled((4, 4), (12 + imgui.calc_text_size(text).x, 26), imgui.get_color_u32((0, 0, 0, 0.55)))
+        draw.add_text((8, 6), imgui.get_color_u32(TEXT), text)
+        if self.notice:
+            draw.add_text((8, 28), imgui.get_color_u32(TEXT), self.notice)
+        imgui.render()
+        self.ctx.screen.use()
+        self.ctx.viewport = (0, 0, width, height)
+        self.ctx.clear(0.0, 0.0, 0.0)
+        imgui.backends.opengl3_render_draw_data(imgui.get_draw_data())
+        glfw.swap_buffers(self.window)
+
+    def run(self, frames: int | None = None) -> int:
+        """Loop until Esc or the window closes (or for ``frames`` frames); the frames drawn."""
+        count = 0
+        while not self.glfw.window_should_close(self.window) and (frames is None or count < frames):
+            self.frame()
+            count += 1
+        return count
+
+    def close(self) -> None:
+        if getattr(self, "app", None) is not None:
+            self.app.close()
+            self.walker.close()
+        self.host.close()
+        imgui.backends.opengl3_shutdown()
+        imgui.backends.glfw_shutdown()
+        imgui.destroy_context(self.imgui_context)
+        self.ctx.release()
+        self.glfw.destroy_window(self.window)
+        self.glfw.terminate()
+
+
+def run_player(
+    scene: Scene,
+    *,
+    size: tuple[int, int] = DEFAULT_SIZE,
+    backend: str | None = None,
+    fly: bool = False,
+    frames: int | None = None,
+) -> int:
+    """Play ``scene`` in a window until it is closed; returns 0."""
+    window = PlayerWindow(scene, size=size, backend=backend, fly=fly)
+    try:
+        window.run(frames)
+    finally:
+        window.close()
+    return 0

@@ -1,0 +1,86 @@
+"""``aberrant play``: one-line errors without a display, and the player in a real window (Xvfb) walking a demo."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("imgui_bundle", reason="the editor extra is not installed: pip install 'aberrant[editor]'")
+
+from test_editor_window import display  # noqa: F401  (the Xvfb fixture)
+
+from aberrant.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+
+#: Runs in the subprocess: play a demo for some frames with W held, then Tab to fly, and report.
+SCRIPT = r"""
+import json
+from imgui_bundle import imgui
+from aberrant.levels import open_level
+from components import Transform
+from editor.player import PlayerWindow
+level = open_level("starter")
+level.scene.set_camera((2.3, 2.2, 3.0), look_at=(0.0, 1.15, -1.6))  # over the floor (the demo's camera is not)
+window = PlayerWindow(level.scene, size=(320, 240), backend="reference")
+camera = level.scene.camera_entity
+start = list(level.scene.get(camera, Transform).position)
+window.run(frames=20)
+settled = list(level.scene.get(camera, Transform).position)
+imgui.get_io().add_key_event(imgui.Key.w, True)
+drawn = window.run(frames=10)
+imgui.get_io().add_key_event(imgui.Key.w, False)
+walked = list(level.scene.get(camera, Transform).position)
+imgui.get_io().add_key_event(imgui.Key.tab, True)
+window.frame()
+imgui.get_io().add_key_event(imgui.Key.tab, False)
+window.frame()
+report = dict(start=start, settled=settled, walked=walked, drawn=drawn, traced=window.host.frames,
+              flying=window.flying, on_ground=window.walker.on_ground, errors=window.errors)
+window.close()
+print("REPORT " + json.dumps(report))
+"""
+
+
+def test_no_display_is_a_one_line_error(monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["play", "starter"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "player needs a display" in err and "xvfb-run aberrant play" in err
+
+
+def test_a_bad_level_or_size_fails_before_a_window(monkeypatch, capsys, tmp_path):
+    monkeypatch.setenv("DISPLAY", ":424242")  # never contacted
+    assert main(["play", "starter", "--size", "0x3"]) == 2
+    assert "--size" in capsys.readouterr().err
+    assert main(["play", str(tmp_path / "missing.json")]) == 2
+    assert "missing.json" in capsys.readouterr().err
+
+
+def test_the_player_walks_a_demo_in_a_window(display):  # noqa: F811
+    env = {"DISPLAY": display, **{k: v for k, v in __import__("os").environ.items() if k != "DISPLAY"}}
+    result = subprocess.run(
+        [sys.executable, "-c", SCRIPT], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
+    )
+    if "needs a display" in result.stderr or "GLX" in result.stderr:
+        pytest.skip(f"the player window cannot open here: {result.stderr.strip().splitlines()[-1]}")
+    lines = [line for line in result.stdout.splitlines() if line.startswith("REPORT ")]
+    assert result.returncode == 0 and lines, result.stderr
+    report = json.loads(lines[-1][len("REPORT ") :])
+    assert report["errors"] == [] and report["drawn"] == 10 and report["traced"] >= 30
+    assert report["on_ground"] and report["settled"][1] < report["start"][1] + 1e-9  # gravity put it on the floor
+    assert report["walked"][2] < report["settled"][2] - 0.05  # W walked forward (-z)
+    assert report["flying"]  # Tab switched to fly
+
+
+def test_the_readme_lists_the_player_keys():
+    from editor.keys import PLAYER
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for binding in PLAYER.values():
+        assert f"`{binding.label}` {binding.does}" in readme
