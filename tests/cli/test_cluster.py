@@ -25,15 +25,10 @@ SIZE = (48, 36)
 @pytest.fixture
 def local_cluster():
     """``start(n, **kwargs)``: a LocalCluster of n worker processes on loopback, closed when the test ends."""
-    from distributed import LocalCluster
-
     started = []
 
     def start(n: int = 2, **kwargs):
-        made = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
-            silence_logs=50, **kwargs,
-        )  # fmt: skip
+        made = cluster.local_cluster(n, **kwargs)
         started.append(made)
         return made
 
