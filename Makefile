@@ -8,7 +8,7 @@
 #      llvmpipe, the OpenCL ICD loader, glfw for the editor. Checked with dpkg on
 #      every run (fast); apt-get runs only when something is missing.
 #   2. .venv (python3.11, or python3 if it is 3.11+), pip upgraded, then
-#      `pip install -e '.[dev,glsl,opencl,editor,bench]'`; stamped on pyproject.toml, so
+#      `pip install -e '.[dev,glsl,opencl,editor,bench,cluster]'`; stamped on pyproject.toml, so
 #      editing pyproject reinstalls and nothing else does.
 
 SHELL := /bin/bash
@@ -31,7 +31,7 @@ APT_PACKAGES := libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri ocl-icd-libopencl1 p
 BASE_PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3 2>/dev/null)
 VENV := .venv
 PY := $(VENV)/bin/python
-EXTRAS := dev,glsl,opencl,editor,bench
+EXTRAS := dev,glsl,opencl,editor,bench,cluster
 VENV_OK := $(VENV)/.stamp-venv
 INSTALLED := $(VENV)/.stamp-installed
 

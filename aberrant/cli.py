@@ -29,6 +29,7 @@ from aberrant.signals import Terminated, terminations_raise
 from engine.errors import AberrantError, shorten
 
 if TYPE_CHECKING:
+    from aberrant.levels import Level
     from backends.base import Backend, Frame
 
 #: The largest image side ``render`` accepts (guards against typos like 80000x600).
@@ -103,6 +104,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         return cmd_render_path(args)
     if args.frames is not None or args.fps is not None or args.duration is not None:
         raise UsageError("--frames, --fps and --duration render a flythrough; add --path")
+    if args.workers is not None or args.scheduler is not None:
+        raise UsageError("--workers and --scheduler spread a flythrough's frames; add --path")
     width, height = parse_size(args.size)
     out = Path(args.out or "frame.png")
     _check_output("--out", out)
@@ -146,8 +149,14 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     width, height = parse_size(args.size)
     out = Path(args.out or "flythrough.gif")
     check_output(out)
+    if args.workers is not None and args.scheduler is not None:
+        raise UsageError("give --workers (a cluster started here) or --scheduler (a running one), not both")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
     level = open_level(args.scene)
     scene = level.scene
+    if args.workers is not None or args.scheduler is not None:
+        return _render_path_on_cluster(args, level, (width, height), out)
 
     def render(backend: Backend) -> float:
         check_frame_memory(backend, (width, height), ("color",), "")
@@ -164,6 +173,30 @@ def cmd_render_path(args: argparse.Namespace) -> int:
         scene.close()
     print(f"wrote {out}")
     print(f"{frames} frames of {width}x{height} with the {backend_name} backend in {elapsed:.1f} s")
+    return 0
+
+
+def _render_path_on_cluster(args: argparse.Namespace, level: Level, size: tuple[int, int], out: Path) -> int:
+    """``render --path --workers N | --scheduler ADDR``: the frames rendered on a Dask cluster (aberrant/cluster.py)."""
+    from aberrant.cluster import render_distributed
+    from aberrant.flythrough import path_for, plan_frames
+    from backends.base import default_backend_name
+
+    try:
+        path = path_for(level)
+        frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
+        where = f"{args.workers} local workers" if args.scheduler is None else f"the cluster at {args.scheduler}"
+        print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps, on {where}")
+        start = time.perf_counter()
+        backend_name = render_distributed(
+            level.scene, path, frames, size, out, backend=args.backend or default_backend_name(),
+            precision=args.precision, workers=args.workers, scheduler=args.scheduler, fps=fps,
+        )  # fmt: skip
+        elapsed = time.perf_counter() - start
+    finally:
+        level.close()
+    print(f"wrote {out}")
+    print(f"{frames} frames of {size[0]}x{size[1]} with the {backend_name} backend in {elapsed:.1f} s")
     return 0
 
 
@@ -312,6 +345,13 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--fps", type=float, default=None, help="flythrough frames per second (default 30)")
     render.add_argument(
         "--duration", type=float, default=None, metavar="SECONDS", help="flythrough length (default: the path's)"
+    )
+    render.add_argument(
+        "--workers", type=int, default=None, metavar="N",
+        help="flythrough frames on a Dask cluster of N processes started here (pip install -e '.[cluster]')",
+    )  # fmt: skip
+    render.add_argument(
+        "--scheduler", default=None, metavar="tcp://HOST:PORT", help="flythrough frames on a running Dask cluster"
     )
     render.set_defaults(func=cmd_render)
 

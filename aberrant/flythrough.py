@@ -48,7 +48,15 @@ from systems.camera_path import CameraPath, Keyframe
 if TYPE_CHECKING:
     from aberrant.levels import Level
 
-__all__ = ["check_output", "default_path", "path_for", "plan_frames", "render_flythrough"]
+__all__ = [
+    "PoseRenderer",
+    "check_output",
+    "default_path",
+    "path_for",
+    "plan_frames",
+    "render_flythrough",
+    "simulate_path",
+]
 
 #: Length of the default path (seconds) and its walking pace (fraction of the camera's speed).
 DEFAULT_DURATION = 4.0
@@ -106,25 +114,19 @@ def render_flythrough(
     frames, fps = plan_frames(path, fps=fps, frames=frames)
     out_path = Path(out)
     kind = check_output(out_path)
-    dt = path.duration / (frames - 1) if frames > 1 else 0.0
     check_fps(fps)
     if kind == "gif":
         check_gif_memory(frames, (int(size[0]), int(size[1])))
-    path.place_camera(scene)
-    walker = path.inputs(scene)
+    poses = simulate_path(scene, path, frames)
     sink = Sink(out_path, kind, fps)
-    stream = sys.stderr if progress is True else (progress or None)
-    bar = None if stream is None else Progress(frames, stream, interval_s=2.0, label="flythrough", unit="frames")
+    bar = progress_bar(progress, frames)
     try:
-        with App(scene, backend, size=size, aovs=("color",), input_source=NoInput()) as app:
+        with PoseRenderer(scene, backend, poses, size) as renderer:
             for index in range(frames):
-                if index == 1:
-                    app.input_source = walker
-                frame = app.tick(dt if index else 0.0)
-                assert frame is not None
+                rgb = renderer.render(index)
                 if on_frame is not None:
-                    on_frame(index, app)
-                sink.add(np.ascontiguousarray(frame.aov("color")[..., :3]))
+                    on_frame(index, renderer.app)
+                sink.add(rgb)
                 if bar is not None:
                     bar.step()
         sink.commit()
@@ -135,6 +137,84 @@ def render_flythrough(
         if bar is not None:
             bar.finish()
     return frames
+
+
+def progress_bar(progress: TextIO | bool, frames: int) -> Progress | None:
+    """The flythrough's bar: on stderr for True, none for False, else on the stream given."""
+    stream = sys.stderr if progress is True else (progress or None)
+    return None if stream is None else Progress(frames, stream, interval_s=2.0, label="flythrough", unit="frames")
+
+
+def simulate_path(scene: Scene, path: CameraPath, frames: int) -> list[Transform]:
+    """The camera's pose at each of ``frames`` frames: ``path`` walked once by the movement and teleport systems.
+
+    Frame 0 is the path's start; each later tick advances the walk by ``duration / (frames - 1)``
+    seconds (aberrations scale the steps, portals teleport the camera). Rendering needs nothing
+    else from the walk, so the frames can then be rendered in any order, anywhere. The scene's
+    camera is left where the walk ends.
+    """
+    if scene.camera_entity is None:
+        raise AberrantError("the scene has no camera to fly")
+    dt = path.duration / (frames - 1) if frames > 1 else 0.0
+    path.place_camera(scene)
+    walker = path.inputs(scene)
+    poses: list[Transform] = []
+    with App(scene, None, input_source=NoInput()) as app:
+        for index in range(frames):
+            if index == 1:
+                app.input_source = walker
+            app.tick(dt if index else 0.0)
+            poses.append(scene.get(scene.camera_entity, Transform))
+    return poses
+
+
+class PoseRenderer:
+    """Renders frames of a scene from recorded camera poses through the tick loop's upload and render systems.
+
+    The tables a float32 backend traces are relative to a floating origin that follows the camera
+    with hysteresis, so they depend on every pose before the frame, not only its own. Frame ``i``
+    is therefore rendered after the uploader has followed poses ``0..i`` (without rendering them),
+    which makes its pixels those of a run that rendered every frame in order, whatever order the
+    frames are asked for in.
+    """
+
+    def __init__(self, scene: Scene, backend: Backend, poses: Sequence[Transform], size: Sequence[int]) -> None:
+        if scene.camera_entity is None:
+            raise AberrantError("the scene has no camera to fly")
+        self.scene, self.backend, self.poses, self.size = scene, backend, list(poses), size
+        self.camera = scene.camera_entity
+        self.app = self._new_app()
+        self.followed = -1  # the last pose the uploader has followed
+
+    def _new_app(self) -> App:
+        return App(self.scene, self.backend, size=self.size, aovs=("color",), input_source=NoInput())
+
+    def render(self, index: int) -> np.ndarray:
+        """Frame ``index`` as (H, W, 3) uint8 RGB."""
+        if not 0 <= index < len(self.poses):
+            raise AberrantError(f"frame {index} is not in this flythrough's {len(self.poses)} frames")
+        if index < self.followed:  # an earlier frame: start again from the first pose
+            self.app.close()
+            self.app = self._new_app()
+            self.followed = -1
+        upload = self.app.upload
+        assert upload is not None
+        for earlier in range(self.followed + 1, index):
+            upload.uploader.sync(self.scene, np.asarray(self.poses[earlier].position, dtype=np.float64))
+        self.scene.set(self.camera, self.poses[index])
+        frame = self.app.tick(0.0)
+        self.followed = index
+        assert frame is not None
+        return np.ascontiguousarray(frame.aov("color")[..., :3])
+
+    def close(self) -> None:
+        self.app.close()
+
+    def __enter__(self) -> PoseRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def default_path(scene: Scene, duration: float = DEFAULT_DURATION) -> CameraPath:

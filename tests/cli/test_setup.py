@@ -77,7 +77,7 @@ def test_install_is_stamped_on_pyproject(tmp_path):
     os.utime(tmp_path / "pyproject.toml")  # now newer than the stamp
     stale = run_make("-n", "test", cwd=tmp_path)
     assert stale.returncode == 0, stale.stderr
-    assert "pip install -q -e '.[dev,glsl,opencl,editor,bench]'" in stale.stdout
+    assert "pip install -q -e '.[dev,glsl,opencl,editor,bench,cluster]'" in stale.stdout
     assert "-m venv" not in stale.stdout  # the venv itself is kept
 
 
