@@ -46,6 +46,12 @@ class BvhParams:
     max_leaf_size: int = 4
     bins: int = 16
     traversal_cost: float = 1.0
+    #: Pre-split triangles whose box's half area exceeds this many times their area (0: never).
+    #: 8 leaves even, well-shaped meshes (a torus, a tessellated ground) exactly as they were.
+    split_ratio: float = 8.0
+    #: At most this fraction of the triangle count in extra references (an asset of long planks
+    #: doubles; at +30 % its frames cost 0.88x the unsplit ones, at +100 % 0.55x).
+    split_budget: float = 1.0
 
     def __post_init__(self) -> None:
         """Reject values the builder cannot honour, naming the field."""
@@ -60,6 +66,10 @@ class BvhParams:
         cost = self.traversal_cost
         if not isinstance(cost, int | float) or isinstance(cost, bool) or not 0 < cost < np.inf:
             raise ValueError(f"BvhParams.traversal_cost must be a finite number > 0, got {cost!r}")
+        for name in ("split_ratio", "split_budget"):
+            x = getattr(self, name)
+            if not isinstance(x, int | float) or isinstance(x, bool) or not 0 <= x < np.inf:
+                raise ValueError(f"BvhParams.{name} must be a finite number >= 0, got {x!r}")
 
 
 def half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -81,6 +91,9 @@ def _sweep(a: np.ndarray, op: np.ufunc, reverse: bool = False) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Bvh:
     """A built tree: ``nodes`` (root at 0) over triangles reordered by ``triangle_order``.
+
+    With pre-splitting a triangle may appear more than once in ``triangle_order`` (one row per leaf
+    that references it); every triangle appears at least once.
 
     ``eq=False``: field-wise ``==`` on arrays is ambiguous; trees compare (and hash) by identity.
     """
@@ -249,7 +262,17 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     corners = verts[tris]
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     cent = corners.sum(axis=1, dtype=np.float64) / 3.0
-    m = len(tris)
+    ref_tri = None
+    if params.split_ratio > 0:
+        from engine.bvh_split import split_references
+
+        ref_tri, lo, hi = split_references(corners, lo, hi, params.split_ratio, params.split_budget)
+        if len(ref_tri) == len(tris):
+            ref_tri = None  # nothing split: the same tree as without splitting
+        else:
+            split = np.bincount(ref_tri, minlength=len(tris)) > 1
+            cent = np.where(split[ref_tri, None], 0.5 * (lo.astype(np.float64) + hi), cent[ref_tri])
+    m = len(lo)
     leaf_max = params.max_leaf_size
     order = np.arange(m, dtype=np.int64)
     first = np.zeros(2 * m - 1, np.int64)
@@ -305,6 +328,8 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     nodes["bounds_min"] = np.nextafter(bmin, np.float32(-np.inf))
     nodes["bounds_max"] = np.nextafter(bmax, np.float32(np.inf))
     nodes["first"], nodes["count"] = first, count
+    if ref_tri is not None:
+        order = ref_tri[order]
     return frozen_bvh(nodes, order.astype(np.int32), params)
 
 

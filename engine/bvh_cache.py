@@ -57,11 +57,14 @@ def _load(path: Path, key: str, m: int, params: BvhParams, width: int = 2) -> Bv
         order = np.ascontiguousarray(data["triangle_order"], dtype=np.int32)
     dtype = BVH_WIDTHS[width]
     columns = dtype.itemsize // 4
-    if raw.ndim != 2 or raw.shape[1] != columns or not 1 <= len(raw) <= 2 * m - 1 or order.shape != (m,):
+    refs = len(order) if order.ndim == 1 else 0
+    if raw.ndim != 2 or raw.shape[1] != columns or not 1 <= len(raw) <= 2 * refs - 1 or refs < m:
         raise ValueError("cached arrays have the wrong shape")
     nodes = raw.view(dtype).reshape(-1).copy()
-    if not (np.sort(order) == np.arange(m)).all():
-        raise ValueError("cached triangle_order is not a permutation")
+    if order.min() < 0 or order.max() >= m or (np.bincount(order, minlength=m) == 0).any():
+        raise ValueError("cached triangle_order misses a triangle or names one out of range")
+    if refs > (m * (1 + params.split_budget) + 1 if params.split_ratio > 0 else m):
+        raise ValueError("cached triangle_order has more references than the split budget allows")
     return frozen_bvh(nodes, order, params)
 
 

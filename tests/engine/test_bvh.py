@@ -64,10 +64,12 @@ MESHES = {
     "degenerate": _degenerate,
     "identical": _identical,
 }
+#: The builder without pre-splitting: the exact one-leaf-per-triangle invariants below hold for it.
+PLAIN = BvhParams(split_ratio=0.0)
 PARAMS = [
-    BvhParams(),
-    BvhParams(max_leaf_size=1, bins=2),
-    BvhParams(max_leaf_size=8, bins=32, traversal_cost=2.5),
+    BvhParams(split_ratio=0.0),
+    BvhParams(split_ratio=0.0, max_leaf_size=1, bins=2),
+    BvhParams(split_ratio=0.0, max_leaf_size=8, bins=32, traversal_cost=2.5),
 ]
 
 
@@ -135,7 +137,7 @@ def test_structural_invariants(name, params):
 def test_invariants_on_small_integer_soups(corners, leaf, bins):
     """Coarse integer corners give coincident centroids, shared faces and degenerate triangles."""
     verts, faces = _from_corners(np.array(corners, np.float32) * 0.5)
-    check_invariants(build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=bins)), verts, faces)
+    check_invariants(build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=leaf, bins=bins)), verts, faces)
 
 
 def test_node_dtype_layout():
@@ -146,15 +148,15 @@ def test_node_dtype_layout():
 
 def test_small_trees_and_reports():
     verts, faces = MESHES["single"]()
-    one = build_bvh(verts, faces)
+    one = build_bvh(verts, faces, PLAIN)
     assert len(one.nodes) == 1 and one.nodes["count"][0] == 1 and one.depth() == 1
     assert one.sah_cost() == pytest.approx(1.0)
     verts, faces = MESHES["two"]()
     # SAH: both halves of the quad span all of it, so a split costs 1 + 1 + 1 = 3 > 2 (a leaf) ...
-    assert len(build_bvh(verts, faces, BvhParams(max_leaf_size=1)).nodes) == 1
+    assert len(build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=1)).nodes) == 1
     # ... while two far-apart triangles are worth separating.
     verts, faces = _from_corners([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[9, 0, 0], [10, 0, 0], [9, 1, 0]]])
-    two = build_bvh(verts, faces, BvhParams(max_leaf_size=1))
+    two = build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=1))
     assert len(two.nodes) == 3 and two.depth() == 2
     assert two.sah_cost() < 2.0
     assert not two.nodes.flags.writeable and not two.triangle_order.flags.writeable
@@ -162,7 +164,7 @@ def test_small_trees_and_reports():
 
 def test_degenerate_triangles_are_kept_and_float64_input_accepted():
     verts, faces = _degenerate(50)
-    bvh = build_bvh(verts.astype(np.float64), faces.astype(np.int64))
+    bvh = build_bvh(verts.astype(np.float64), faces.astype(np.int64), PLAIN)
     check_invariants(bvh, verts, faces)
 
 
@@ -192,12 +194,12 @@ def _median_split_bvh(verts: np.ndarray, faces: np.ndarray, leaf: int = 4) -> Bv
     for i, (start, n, child) in enumerate(nodes):
         pts = corners[order[start : start + n]].reshape(-1, 3)
         out[i] = (pts.min(axis=0), child if child >= 0 else start, pts.max(axis=0), 0 if child >= 0 else n)
-    return Bvh(nodes=out, triangle_order=order.astype(np.int32), params=BvhParams(max_leaf_size=leaf))
+    return Bvh(nodes=out, triangle_order=order.astype(np.int32), params=BvhParams(split_ratio=0.0, max_leaf_size=leaf))
 
 
 def test_sah_beats_median_split_on_random_soup():
     verts, faces = _soup(5000, seed=3)
-    sah = build_bvh(verts, faces)
+    sah = build_bvh(verts, faces, PLAIN)
     median = _median_split_bvh(verts, faces)
     assert sah.sah_cost() < median.sah_cost()
 
@@ -262,7 +264,7 @@ def _brute_force(corners: np.ndarray, o: np.ndarray, d: np.ndarray) -> tuple[np.
 @pytest.mark.parametrize("name", ["soup", "icosphere"])
 def test_traversal_matches_brute_force(name):
     verts, faces = _soup(1500, seed=5) if name == "soup" else _icosphere(3)
-    bvh = build_bvh(verts, faces)
+    bvh = build_bvh(verts, faces, PLAIN)
     corners = verts[faces].astype(np.float64)
     rng = np.random.default_rng(7)
     lo, hi = corners.reshape(-1, 3).min(axis=0), corners.reshape(-1, 3).max(axis=0)
@@ -306,7 +308,7 @@ def test_memory_cache_returns_the_same_tree(tmp_path, fresh_memory):
     verts, faces = _icosphere(2)
     first = cached_bvh(verts, faces, cache_dir=tmp_path)
     assert cached_bvh(verts.copy(), faces.copy(), cache_dir=tmp_path) is first
-    assert cached_bvh(verts, faces, BvhParams(bins=8), cache_dir=tmp_path) is not first
+    assert cached_bvh(verts, faces, BvhParams(split_ratio=0.0, bins=8), cache_dir=tmp_path) is not first
 
 
 def test_disk_cache_is_used(tmp_path, fresh_memory, monkeypatch):
@@ -473,14 +475,14 @@ def test_collapse_to_wide(name, params, width):
 )
 def test_collapse_on_small_integer_soups(corners, leaf, width):
     verts, faces = _from_corners(np.array(corners, np.float32) * 0.5)
-    binary = build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=4))
+    binary = build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=leaf, bins=4))
     check_wide(collapse(binary, width), binary, verts, faces, width)
 
 
 def test_collapse_fills_nodes_and_pulls_the_largest_child():
     """A balanced tree of 16 leaves collapses to a root of 4 nodes of 4 leaves each: 5 wide nodes."""
     verts, faces = _from_corners([[[x, y, 0], [x + 0.5, y, 0], [x, y + 0.5, 0]] for x in range(4) for y in range(4)])
-    binary = build_bvh(verts * 10, faces, BvhParams(max_leaf_size=1))
+    binary = build_bvh(verts * 10, faces, BvhParams(split_ratio=0.0, max_leaf_size=1))
     wide = collapse(binary)
     check_wide(wide, binary, verts * 10, faces)
     assert len(wide.nodes) == 5 and (wide.nodes["count"] >= 0).all()
@@ -495,7 +497,7 @@ def test_collapse_to_eight_fills_nodes():
     beside the other half's two nodes, which fill a full node and one of 2 leaves: 3 wide nodes, where
     pulling by area alone made 9 (a root of 8 inner nodes of 2 leaves each)."""
     verts, faces = _from_corners([[[x, y, 0], [x + 0.5, y, 0], [x, y + 0.5, 0]] for x in range(4) for y in range(4)])
-    binary = build_bvh(verts * 10, faces, BvhParams(max_leaf_size=1))
+    binary = build_bvh(verts * 10, faces, BvhParams(split_ratio=0.0, max_leaf_size=1))
     wide = collapse(binary, 8)
     check_wide(wide, binary, verts * 10, faces, 8)
     count = wide.nodes["count"].reshape(-1, 8)
@@ -511,7 +513,7 @@ def test_collapse_keeps_few_half_empty_nodes():
 
     mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.4, major_sections=60, minor_sections=30)
     verts, faces = np.asarray(mesh.vertices, np.float32), np.asarray(mesh.faces, np.int64)
-    binary = build_bvh(verts, faces)
+    binary = build_bvh(verts, faces, PLAIN)
     wide = collapse(binary, 8)
     check_wide(wide, binary, verts, faces, 8)
     count = wide.nodes["count"].reshape(-1, 8)
@@ -522,7 +524,7 @@ def test_collapse_keeps_few_half_empty_nodes():
 @pytest.mark.parametrize("width", WIDE)
 def test_leaf_blocks_cover_every_leaf_in_fours(width):
     verts, faces = _soup(3000, seed=3)
-    wide = collapse(build_bvh(verts, faces, BvhParams(max_leaf_size=6)), width)
+    wide = collapse(build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=6)), width)
     lanes, child = leaf_blocks(wide)
     count = wide.nodes["count"]
     assert lanes.shape[1] == 4 and child.shape == count.shape
@@ -635,7 +637,7 @@ def test_compact_records_mirror_the_tree_conservatively(name, params):
 def test_compact_records_on_float_soups(corners, offset, leaf):
     """Any float boxes, near or far from the origin (grid steps below an ulp there): still conservative."""
     verts, faces = _from_corners(np.array(corners, np.float32) + np.float32(offset))
-    binary = build_bvh(verts, faces, BvhParams(max_leaf_size=leaf, bins=4))
+    binary = build_bvh(verts, faces, BvhParams(split_ratio=0.0, max_leaf_size=leaf, bins=4))
     check_compact(compact(binary), binary)
 
 
@@ -671,13 +673,13 @@ def test_compact_frame_and_boxes_at_the_edges(lo, hi):
 def test_compact_lone_leaf_and_links():
     """A lone leaf is the header's root link; records need a binary tree; links carry offsets."""
     verts, faces = _from_corners(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], np.float32))
-    lone = build_bvh(verts, faces)
+    lone = build_bvh(verts, faces, PLAIN)
     records = compact(lone)
     assert len(records) == 1 and records["child0"][0, 3] == (0 << layout.BVH_LINK_SHIFT | 1)
     moved = offset_compact(records, node_base=10, tri_base=5)
     assert moved["child0"][0, 3] == (5 << layout.BVH_LINK_SHIFT | 1) and moved["child1"][0, 3] == -1
     verts, faces = MESHES["icosphere"]()
-    binary = build_bvh(verts, faces)
+    binary = build_bvh(verts, faces, PLAIN)
     records = compact(binary)
     moved = offset_compact(records, node_base=10, tri_base=5)
     mask = (1 << layout.BVH_LINK_SHIFT) - 1
