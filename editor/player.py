@@ -33,7 +33,7 @@ TEXT = (1.0, 0.9, 0.5, 1.0)
 
 
 def player_keys(dt: float, mouse: tuple[float, float]) -> InputState:
-    """This frame's movement from :data:`PLAYER`'s keys, the mouse's motion and the turning keys."""
+    """This frame's movement from :data:`editor.keys.PLAYER`'s keys, the mouse's motion and the turning keys."""
     down = {name: binding.down() for name, binding in PLAYER.items() if not binding.mouse}
     keys = Keys(
         forward=down["forward"], back=down["back"], left=down["left"], right=down["right"],

@@ -29,14 +29,15 @@ from editor.panels.viewport import Image, ViewRequest
 from editor.preview import PreviewRenderer
 from editor.ui import EditorUi
 from engine.errors import AberrantError
+from engine.scene import Scene
 
 if TYPE_CHECKING:
     import glfw
 
-    from engine.scene import Scene
-
-    #: A glfw window handle (the stub names its pointer type only privately; a string, so docs tools can run this).
-    Window: TypeAlias = "glfw._GLFWwindowPointerT"
+    #: A glfw window handle (the stub names its pointer type only privately).
+    Window: TypeAlias = glfw._GLFWwindowPointerT
+else:
+    Window = object  # what readers and docs tools see; glfw's module has no name for the handle's type
 
 #: Backends the editor tries, in order, when none is named (GLSL first: it draws without a read-back).
 PREFERRED_BACKENDS = ("glsl", "opencl", "reference")
