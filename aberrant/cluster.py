@@ -47,6 +47,7 @@ from systems.camera_path import CameraPath
 
 if TYPE_CHECKING:
     from backends.base import Backend
+    from engine.layout import Precision
 
 __all__ = ["CONNECT_TIMEOUT_S", "FrameJob", "frame_job", "local_cluster", "render_distributed", "work_folder"]
 
@@ -120,7 +121,7 @@ class BackendHolder:
 
     name = PLUGIN
 
-    def __init__(self, backend: str, precision: str | None) -> None:
+    def __init__(self, backend: str, precision: Precision | None) -> None:
         self.backend_name, self.precision = backend, precision
         self.backend: Backend | None = None
         self.error: str | None = None
@@ -134,7 +135,7 @@ class BackendHolder:
         try:
             self.backend = create_backend(
                 self.backend_name,
-                precision=self.precision,  # type: ignore[arg-type]
+                precision=self.precision,
                 fallback=self.backend_name == "auto",
                 log=lambda message: None,
             )
@@ -171,7 +172,7 @@ class BackendHolder:
             self.backend = None
 
 
-def _plugin(backend: str, precision: str | None) -> BackendHolder:
+def _plugin(backend: str, precision: Precision | None) -> BackendHolder:
     """A :class:`BackendHolder` that Dask takes as a worker plugin (the subclass needs dask, imported here)."""
     from distributed.diagnostics.plugin import WorkerPlugin
 
@@ -262,7 +263,7 @@ def _client(workers: int | None, scheduler: str | None, timeout_s: float) -> Ite
         cluster.close()
 
 
-def _start_backends(client: Any, backend: str, precision: str | None) -> str:
+def _start_backends(client: Any, backend: str, precision: Precision | None) -> str:
     """Open the backend on every worker; the one name they all run, or one line saying what failed."""
     client.register_plugin(_plugin(backend, precision), name=PLUGIN)
     status = client.run(_backend_status)
@@ -318,7 +319,7 @@ def render_distributed(
     out: str | os.PathLike[str],
     *,
     backend: str = "auto",
-    precision: str | None = None,
+    precision: Precision | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
     fps: float | None = None,

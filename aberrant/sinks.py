@@ -25,7 +25,7 @@ import subprocess
 import tempfile
 from fractions import Fraction
 from pathlib import Path
-from typing import IO, NoReturn
+from typing import IO, TYPE_CHECKING, NoReturn
 
 import numpy as np
 
@@ -38,6 +38,9 @@ from engine.atomic_files import (
     temp_path,
     write_atomically,
 )
+
+if TYPE_CHECKING:
+    from PIL import Image
 from engine.errors import AberrantError, shorten
 
 VIDEO_SUFFIXES = (".mp4", ".gif")
@@ -201,7 +204,7 @@ class Sink:
             self.out = check_target(out)  # a symlink's file: the link stays
         clean_stale_temps(self.out)  # what a killed run left here
         self.tmp = temp_path(self.out, ".mp4" if kind == "mp4" else "")
-        self.frames: list[object] = []
+        self.frames: list[Image.Image] = []
         self.count = 0
         self.writer: Ffmpeg | None = None
         if kind == "png":
@@ -232,7 +235,7 @@ class Sink:
         if self.kind == "gif":
             buffer = io.BytesIO()
             first, *rest = self.frames
-            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))  # type: ignore[attr-defined]
+            first.save(buffer, "GIF", save_all=True, append_images=rest, loop=0, duration=round(1000.0 / self.fps))
             self.frames.clear()
             write_atomically({self.out: buffer.getvalue()})
             return

@@ -36,7 +36,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bump whenever the builder's output changes, so stale disk caches are ignored.
-BUILDER_VERSION = 2
+BUILDER_VERSION = 3
 
 
 @dataclass(frozen=True)

@@ -23,7 +23,8 @@ __all__ = ["split_references"]
 def _pieces(box_area: np.ndarray, tri_area: np.ndarray, ratio: float, budget: float) -> np.ndarray:
     """Pieces per triangle (>= 1): extra references out of ``budget * m`` in proportion to the excess area."""
     m = box_area.size
-    excess = np.where(box_area > ratio * tri_area, box_area - ratio * tri_area, 0.0)
+    # A zero-area triangle is never hit (the watertight test rejects it): splitting it would only add references.
+    excess = np.where((box_area > ratio * tri_area) & (tri_area > 0.0), box_area - ratio * tri_area, 0.0)
     total = excess.sum()
     extra = int(budget * m)
     if total <= 0 or extra < 1:

@@ -89,7 +89,8 @@ def in_view_slots(count: int) -> Iterator[Slot]:
     The grid spans 80 % of the view's height at that distance, so every slot is wholly in the frustum
     (for any aspect of at least 1), and each slot's square covers :data:`COVERAGE` of its cell.
     """
-    rotation = tuple(float(c) for c in look_at_quat(EYE, LOOK_AT))
+    q = look_at_quat(EYE, LOOK_AT)
+    rotation = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
     axes = quat_to_matrix(rotation)  # columns: right, up, back
     side = _side(count)
     span = 0.8 * 2.0 * GRID_DISTANCE * math.tan(math.radians(FOV_DEG) / 2.0)
@@ -101,7 +102,7 @@ def in_view_slots(count: int) -> Iterator[Slot]:
         u = (col + 0.5) * cell - 0.5 * span
         v = 0.5 * span - (row + 0.5) * cell
         p = centre + u * axes[:, 0] + v * axes[:, 1]
-        yield Slot((float(p[0]), float(p[1]), float(p[2])), rotation, half)  # type: ignore[arg-type]
+        yield Slot((float(p[0]), float(p[1]), float(p[2])), rotation, half)
 
 
 def out_of_view_slots(count: int) -> Iterator[Slot]:
