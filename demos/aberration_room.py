@@ -1,6 +1,6 @@
 """The thesis's aberration room: a black wall splits it, space squeezed along x on the left, along y on the right.
 
-Rebuilt from the thesis's own scene file (``shared/tello/Scenes/AberrationRoom``)
+Rebuilt from the thesis's own scene file (``tests/data/tello/Scenes/AberrationRoom``)
 with its dimensions and deformations: a floor 20 × 40 (top at y = 1), side
 walls at x = ±10.5, a ceiling at y = 10, and a black dividing wall (1 × 9 × 28)
 down the middle. Each half holds a ``radial`` aberration along world axes with
