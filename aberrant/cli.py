@@ -31,6 +31,7 @@ from engine.errors import AberrantError, shorten
 if TYPE_CHECKING:
     from aberrant.levels import Level
     from backends.base import Backend, Frame
+    from editor.reload import LevelWatcher
 
 #: The largest image side ``render`` accepts (guards against typos like 80000x600).
 MAX_SIDE = 16384
@@ -288,15 +289,27 @@ def cmd_editor(args: argparse.Namespace) -> int:
     from aberrant.levels import open_level
 
     model = EditorModel()
+    watcher = None
     if args.scene is not None:  # a bad file, module or name fails here, before a window opens
         level = open_level(args.scene)
         model = EditorModel(level.scene, level.file if level.kind == "scene" else None, demo=level.demo or level.label)
+        watcher = level_watcher(args.scene, level) if level.kind == "code" else None  # a scene file is the model's
     try:
         if size is None:
-            return run_editor(model, backend=args.backend)
-        return run_editor(model, backend=args.backend, size=size)
+            return run_editor(model, backend=args.backend, watcher=watcher)
+        return run_editor(model, backend=args.backend, size=size, watcher=watcher)
     except EditorUnavailable as e:
         raise UsageError(str(e)) from None
+
+
+def level_watcher(source: str, level: Level) -> LevelWatcher | None:
+    """Hot reload for a level read from a file (a demo has none to watch): rebuilt the way it was opened."""
+    from aberrant.levels import open_level
+    from editor.reload import LevelWatcher
+
+    if level.file is None:
+        return None
+    return LevelWatcher(level.file, lambda: open_level(source).scene, level.scene)
 
 
 def cmd_play(args: argparse.Namespace) -> int:
@@ -313,8 +326,11 @@ def cmd_play(args: argparse.Namespace) -> int:
     from aberrant.levels import open_level
 
     with open_level(args.scene) as level:
+        watcher = level_watcher(args.scene, level)
         try:
-            return run_player(level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames)
+            return run_player(
+                level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames, watcher=watcher
+            )
         except EditorUnavailable as e:
             raise UsageError(str(e)) from None
 

@@ -69,6 +69,8 @@ class DocumentsMixin:
     save_as_requested: bool = False
     #: Bumped whenever the scene object is replaced (consumers drop what they cached for the old one).
     generation: int = 0
+    #: Bumped by every successful save (a file watcher takes the file it just saw change as the editor's own).
+    saves: int = 0
 
     @staticmethod
     def blank_scene() -> Scene:
@@ -151,6 +153,13 @@ class DocumentsMixin:
         self.info(f"opened {path}")
         return True
 
+    def reload(self, scene: Scene) -> None:
+        """Take ``scene``, the document's file as changed on disk, in place of an unmodified document."""
+        selected = self.selected_name
+        self.replace_scene(scene, self.path, self.demo)
+        self.selected_name = selected  # ``selected`` is None if the new version has no such entity
+        self.info(f"reloaded {self.path.name if self.path is not None else scene.name} (changed on disk)")
+
     def open_demo(self, name: str) -> bool:
         from demos import build_demo
 
@@ -186,6 +195,7 @@ class DocumentsMixin:
         self.demo = None
         self.save_as_requested = False
         self.mark_saved()
+        self.saves += 1
         self.info(f"saved {target}")
         pending = self.pending
         if pending is not None and pending.after_save:

@@ -18,7 +18,9 @@ from imgui_bundle import imgui  # first: points the glfw module at imgui-bundle'
 from editor.backend_host import BackendHost
 from editor.keys import PLAYER
 from editor.play import Keys, LiveInput, input_state
+from editor.reload import LevelWatcher, keep_camera
 from editor.window import PREFERRED_BACKENDS, EditorUnavailable, create_gl_window, display_problem
+from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
 from engine.scene import Scene
 from systems.app import App
@@ -30,6 +32,7 @@ TURN_SPEED = 120.0
 #: Fraction of the window's pixels traced (the image is stretched to fit).
 SCALE = 0.5
 TEXT = (1.0, 0.9, 0.5, 1.0)
+ERROR_TEXT = (1.0, 0.45, 0.4, 1.0)
 
 
 def player_keys(dt: float, mouse: tuple[float, float]) -> InputState:
@@ -50,7 +53,13 @@ class PlayerWindow:
     """A window playing one scene; :meth:`run` loops until Esc or the window closes."""
 
     def __init__(
-        self, scene: Scene, *, size: tuple[int, int] = DEFAULT_SIZE, backend: str | None = None, fly: bool = False
+        self,
+        scene: Scene,
+        *,
+        size: tuple[int, int] = DEFAULT_SIZE,
+        backend: str | None = None,
+        fly: bool = False,
+        watcher: LevelWatcher | None = None,
     ) -> None:
         import glfw
         import moderngl
@@ -63,6 +72,9 @@ class PlayerWindow:
         scene.validate()
         self.glfw = glfw
         self.scene = scene
+        self._given = scene  # the caller's to close; scenes swapped in by a reload are the player's
+        #: Rebuilds the level when its file or meshes change on disk (None: no hot reload).
+        self.watcher = watcher
         self.window = create_gl_window(size, f"aberrant play: {scene.name}")
         glfw.make_context_current(self.window)
         glfw.swap_interval(1)
@@ -94,6 +106,30 @@ class PlayerWindow:
         self._cursor: tuple[float, float] | None = None
         self._last = time.perf_counter()
         glfw.set_input_mode(self.window, glfw.CURSOR, glfw.CURSOR_DISABLED)
+
+    def reload(self) -> bool:
+        """Swap in the level as rebuilt from disk, the camera kept where it is; a broken one leaves an error."""
+        scene = self.watcher.poll() if self.watcher is not None else None
+        if scene is None:
+            return False
+        assert self.watcher is not None and self.host.backend is not None
+        keep_camera(self.scene, scene)
+        try:
+            scene.validate()
+            app = App(scene, self.host.backend, size=self._trace_size(), aovs=self.host.aovs, input_source=self.input)
+        except AberrantError as e:
+            scene.close()
+            self.watcher.report(e)
+            self.scene.activate()
+            return False
+        old, self.scene = self.scene, scene
+        self.app.close()
+        self.walker.close()
+        self.app, self.walker = app, Walker.of(scene)
+        if old is not self._given:
+            old.close()
+        scene.activate()
+        return True
 
     def _trace_size(self) -> tuple[int, int]:
         w, h = self.glfw.get_framebuffer_size(self.window)
@@ -131,6 +167,7 @@ class PlayerWindow:
         now = time.perf_counter()
         dt, self._last = min(now - self._last, 0.1), now
         self.frame_times.append(dt)
+        self.reload()
         imgui.backends.opengl3_new_frame()
         imgui.backends.glfw_new_frame()
         imgui.new_frame()
@@ -162,6 +199,8 @@ class PlayerWindow:
         draw.add_text((8, 6), imgui.get_color_u32(TEXT), text)
         if self.notice:
             draw.add_text((8, 28), imgui.get_color_u32(TEXT), self.notice)
+        if self.watcher is not None and self.watcher.error:
+            draw.add_text((8, 50), imgui.get_color_u32(ERROR_TEXT), f"not reloaded: {self.watcher.error}")
         imgui.render()
         self.ctx.screen.use()
         self.ctx.viewport = (0, 0, width, height)
@@ -181,6 +220,8 @@ class PlayerWindow:
         if getattr(self, "app", None) is not None:
             self.app.close()
             self.walker.close()
+            if self.scene is not self._given:
+                self.scene.close()
         self.host.close()
         imgui.backends.opengl3_shutdown()
         imgui.backends.glfw_shutdown()
@@ -197,9 +238,10 @@ def run_player(
     backend: str | None = None,
     fly: bool = False,
     frames: int | None = None,
+    watcher: LevelWatcher | None = None,
 ) -> int:
-    """Play ``scene`` in a window until it is closed; returns 0."""
-    window = PlayerWindow(scene, size=size, backend=backend, fly=fly)
+    """Play ``scene`` in a window until it is closed (reloading it on a change ``watcher`` sees); returns 0."""
+    window = PlayerWindow(scene, size=size, backend=backend, fly=fly, watcher=watcher)
     try:
         window.run(frames)
     finally:

@@ -225,6 +225,12 @@ class EditorUi:
         internal.dock_builder_dock_window("Viewport", right.id_at_opposite_dir)
         internal.dock_builder_finish(dock)
 
+    def reloaded(self) -> None:
+        """The model took its file's new version: drop what was cached for the old scene, keep the view."""
+        self._generation = self.model.generation
+        self.stop_play()
+        self.host.invalidate()
+
     def _status_bar(self) -> None:
         flags = imgui.WindowFlags_.no_scrollbar | imgui.WindowFlags_.no_saved_settings | imgui.WindowFlags_.menu_bar
         viewport = imgui.get_main_viewport()

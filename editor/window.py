@@ -27,6 +27,7 @@ from editor.backend_host import BackendHost
 from editor.model import EditorModel
 from editor.panels.viewport import Image, ViewRequest
 from editor.preview import PreviewRenderer
+from editor.reload import DocumentReload, LevelWatcher
 from editor.ui import EditorUi
 from engine.errors import AberrantError
 from engine.scene import Scene
@@ -84,7 +85,14 @@ def create_gl_window(size: tuple[int, int], title: str) -> Window:
 class EditorWindow:
     """A window running the editor; :meth:`run` loops until it is closed (or for a number of frames)."""
 
-    def __init__(self, model: EditorModel, *, size: tuple[int, int] = DEFAULT_SIZE, backend: str | None = None) -> None:
+    def __init__(
+        self,
+        model: EditorModel,
+        *,
+        size: tuple[int, int] = DEFAULT_SIZE,
+        backend: str | None = None,
+        watcher: LevelWatcher | None = None,
+    ) -> None:
         import glfw
         import moderngl
 
@@ -130,6 +138,8 @@ class EditorWindow:
             model.error("no tracer backend can start here; the viewport shows the raster preview")
         self.preview = PreviewRenderer(self.ctx)
         self.ui = EditorUi(model, self.host, self.images)
+        #: Hot reload of the document's file (or of the level module ``watcher`` watches).
+        self.disk = DocumentReload(model, watcher)
         self._title = ""
         self._captured = False
         self._cursor: tuple[float, float] | None = None
@@ -262,6 +272,14 @@ class EditorWindow:
         pixels = np.frombuffer(data, np.uint8).reshape(height, width, 3)[::-1]
         PilImage.fromarray(pixels).save(path)
 
+    def watch_disk(self) -> None:
+        """Take the document's file as changed on disk (when unmodified); a reload or its message is drawn."""
+        messages = len(self.model.messages)
+        if self.disk.poll(playing=self.ui.playing):
+            self.ui.reloaded()
+        if len(self.model.messages) != messages:
+            self.still_frames = 0
+
     @property
     def busy(self) -> bool:
         """Whether the next frame may look different without new input: play ticks, typing, a drag, a new image."""
@@ -279,6 +297,7 @@ class EditorWindow:
         while not self.glfw.window_should_close(self.window):
             count += 1
             last = frames is not None and count >= frames
+            self.watch_disk()
             before = (self.events, self.host.frames, self.preview.renders)
             if not self.busy:
                 self.glfw.wait_events_timeout(self.idle_wait_s)
@@ -330,10 +349,14 @@ def run_editor(
     frames: int | None = None,
     screenshot: str | Path | None = None,
     size: tuple[int, int] = DEFAULT_SIZE,
+    watcher: LevelWatcher | None = None,
 ) -> int:
-    """Open the editor on ``target``; returns when its window closes (or after ``frames`` frames)."""
+    """Open the editor on ``target``; returns when its window closes (or after ``frames`` frames).
+
+    The document reloads when its scene file changes on disk (``watcher``: a level module's instead).
+    """
     model = target if isinstance(target, EditorModel) else load_target(target)
-    window = EditorWindow(model, size=size, backend=backend)
+    window = EditorWindow(model, size=size, backend=backend, watcher=watcher)
     try:
         window.run(frames, Path(screenshot) if screenshot is not None else None)
     finally:

@@ -84,3 +84,69 @@ def test_the_readme_lists_the_player_keys():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     for binding in PLAYER.values():
         assert f"`{binding.label}` {binding.does}" in readme
+
+
+#: Runs in the subprocess: play a scene file, save a change, break it, fix it; report what the window played.
+RELOAD_SCRIPT = r"""
+import json, os, sys
+from pathlib import Path
+from aberrant.levels import open_level
+from components import Transform
+from editor.player import PlayerWindow
+from editor.reload import LevelWatcher
+from engine.scene import Scene
+from engine.scene_file import save_scene
+
+path = Path(sys.argv[1])
+def save(x, text=None):
+    old = path.stat() if path.exists() else None
+    if text is None:
+        scene = Scene("reload")
+        scene.add_mesh("floor", "plane", scale=(20.0, 1.0, 20.0))
+        scene.add_mesh("box", "box", position=(x, 0.5, 0.0))
+        scene.set_camera((0.0, 1.7, 5.0), look_at=(0.0, 1.0, 0.0))
+        save_scene(scene, path)
+        scene.close()
+    else:
+        path.write_text(text)
+    if old is not None:
+        os.utime(path, ns=(old.st_atime_ns, old.st_mtime_ns + 10**9))
+def box():
+    return window.scene.get(window.scene.entity("box"), Transform).position[0]
+save(1.0)
+level = open_level(path)
+watcher = LevelWatcher(path, lambda: open_level(path).scene, level.scene, period=0.0)
+window = PlayerWindow(level.scene, size=(160, 120), backend="reference", fly=True, watcher=watcher)
+window.run(frames=2)
+camera = Transform(position=(2.0, 3.0, 4.0), rotation=window.scene.get(window.scene.camera_entity, Transform).rotation)
+window.scene.set(window.scene.camera_entity, camera)
+save(2.0)
+window.frame()
+kept = window.scene.get(window.scene.camera_entity, Transform) == camera
+reloaded = [box(), window.scene is not level.scene]
+save(0.0, "{ not json")
+window.frame()
+broken = [box(), watcher.error]
+save(3.0)
+window.run(frames=2)
+report = dict(kept=kept, reloaded=reloaded, broken=broken, fixed=[box(), watcher.error], errors=window.errors)
+window.close()
+level.close()
+print("REPORT " + json.dumps(report))
+"""
+
+
+def test_the_player_reloads_a_saved_level_and_keeps_the_last_good_one(display, tmp_path):  # noqa: F811
+    env = {"DISPLAY": display, **{k: v for k, v in __import__("os").environ.items() if k != "DISPLAY"}}
+    result = subprocess.run(
+        [sys.executable, "-c", RELOAD_SCRIPT, str(tmp_path / "level.json")],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=240,
+    )  # fmt: skip
+    if "needs a display" in result.stderr or "GLX" in result.stderr:
+        pytest.skip(f"the player window cannot open here: {result.stderr.strip().splitlines()[-1]}")
+    lines = [line for line in result.stdout.splitlines() if line.startswith("REPORT ")]
+    assert result.returncode == 0 and lines, result.stderr
+    report = json.loads(lines[-1][len("REPORT ") :])
+    assert report["errors"] == [] and report["kept"] and report["reloaded"] == [2.0, True]
+    assert report["broken"][0] == 2.0 and "level.json" in report["broken"][1] and "JSON" in report["broken"][1]
+    assert report["fixed"] == [3.0, None]
