@@ -140,6 +140,14 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_cluster_args(args: argparse.Namespace) -> None:
+    """``--workers N`` or ``--scheduler ADDR``, not both, and N at least 1."""
+    if args.workers is not None and args.scheduler is not None:
+        raise UsageError("give --workers (a cluster started here) or --scheduler (a running one), not both")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+
+
 def cmd_render_path(args: argparse.Namespace) -> int:
     """``render --path``: a flythrough walked by the real systems (aberrant/flythrough.py)."""
     from aberrant.flythrough import check_output, path_for, plan_frames, render_flythrough
@@ -150,10 +158,7 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     width, height = parse_size(args.size)
     out = Path(args.out or "flythrough.gif")
     check_output(out)
-    if args.workers is not None and args.scheduler is not None:
-        raise UsageError("give --workers (a cluster started here) or --scheduler (a running one), not both")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {args.workers}")
+    _check_cluster_args(args)
     level = open_level(args.scene)
     scene = level.scene
     if args.workers is not None or args.scheduler is not None:
@@ -259,19 +264,22 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
     if args.from_results:
         try:
-            written = rerender(Path(args.from_results), Path(args.out))
+            written = rerender([Path(p) for p in args.from_results], Path(args.out))
         except RecursionError:  # json's decoder recurses once per level of nesting
             raise UsageError(
-                f"--from-results {shorten(args.from_results)}: nested too deeply to be a results.json"
+                f"--from-results {shorten(' '.join(args.from_results))}: nested too deeply to be a results.json"
             ) from None
         for path in written:
             print(f"wrote {path}")
         return 0
+    _check_cluster_args(args)
     config = make_config(
         scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
         repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
         command=" ".join([PROG, *(args.argv or [])]), jobs=args.jobs, time_limit_s=args.time_limit,
     )  # fmt: skip
+    if args.workers is not None or args.scheduler is not None:
+        return bench_command(config, workers=args.workers, scheduler=args.scheduler)
     return bench_command(config)
 
 
@@ -423,9 +431,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--from-results",
+        nargs="+",
         default=None,
         metavar="RESULTS.json",
-        help="only re-render report and plot from a results.json",
+        help="only re-render report and plot from results.json files (several: one table across their machines)",
+    )
+    bench.add_argument(
+        "--workers", type=int, default=None, metavar="N",
+        help="measure the cells on a Dask cluster of N processes started here (pip install -e '.[cluster]')",
+    )  # fmt: skip
+    bench.add_argument(
+        "--scheduler", default=None, metavar="tcp://HOST:PORT", help="measure the cells on a running Dask cluster"
     )
     bench.set_defaults(func=cmd_bench)
 

@@ -49,7 +49,15 @@ if TYPE_CHECKING:
     from backends.base import Backend
     from engine.layout import Precision
 
-__all__ = ["CONNECT_TIMEOUT_S", "FrameJob", "frame_job", "local_cluster", "render_distributed", "work_folder"]
+__all__ = [
+    "CONNECT_TIMEOUT_S",
+    "FrameJob",
+    "connect",
+    "frame_job",
+    "local_cluster",
+    "render_distributed",
+    "work_folder",
+]
 
 #: How long to try reaching a ``--scheduler`` before giving up.
 CONNECT_TIMEOUT_S = 10.0
@@ -219,12 +227,14 @@ def local_cluster(workers: int, **kwargs: Any) -> Any:
 
     Dask's nannies set ``MALLOC_TRIM_THRESHOLD_`` in their workers, which turns off glibc's adaptive
     mmap threshold: every large NumPy temporary is then mapped and unmapped afresh, and the
-    reference backend's frames took twice as long. Its workers go without it.
+    reference backend's frames took twice as long. Its workers go without it. They are not daemonic
+    processes either, so that a task may start processes of its own (the bench's Embree pool does).
     """
     import dask
 
     distributed = _distributed()
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    settings = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None, "distributed.worker.daemon": False}
+    with dask.config.set(settings):
         return distributed.LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
@@ -237,7 +247,7 @@ def local_cluster(workers: int, **kwargs: Any) -> Any:
 
 
 @contextlib.contextmanager
-def _client(workers: int | None, scheduler: str | None, timeout_s: float) -> Iterator[Any]:
+def connect(workers: int | None, scheduler: str | None, timeout_s: float) -> Iterator[Any]:
     """A client of the cluster at ``scheduler``, or of a LocalCluster of ``workers`` processes started here."""
     distributed = _distributed()
     if scheduler is not None:
@@ -342,7 +352,7 @@ def render_distributed(
     poses = simulate_path(scene, path, frames)
     job = frame_job(scene, poses, (width, height))
     timeout_s = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
-    with _client(workers, scheduler, timeout_s) as client:
+    with connect(workers, scheduler, timeout_s) as client:
         name = _start_backends(client, backend, precision)
         folder = work_folder(out_path, job, name, precision)
         _render_frames(client, job, name, folder, progress)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import socket
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +28,9 @@ def _cpu_model() -> str:
 
 
 def machine_info(backends: list[str], probes: dict[str, str | None]) -> dict[str, Any]:
-    """CPU, cores, OS, Python and each backend's device (the report names the machine)."""
+    """Host name, CPU, cores, OS, Python and each backend's device (the report names the machine)."""
     info: dict[str, Any] = {
+        "name": socket.gethostname() or platform.node() or "?",
         "cpu": _cpu_model(),
         "cores": os.cpu_count(),
         "platform": platform.platform(),

@@ -249,6 +249,9 @@ def _detail(results: dict[str, Any]) -> list[str]:
         "perceived err p99",
         "NaN",
     ]
+    several = len({r.get("machine") for r in results["rows"]}) > 1
+    if several:
+        header.insert(1, "machine")
     by_scene: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for row in results["rows"]:
         by_scene[row["scene"]].append(row)
@@ -284,6 +287,8 @@ def _detail(results: dict[str, Any]) -> list[str]:
                     str(e["nan_count"]),
                 ]
             )
+            if several:
+                table[-1].insert(1, f"{r['machine']} ({r.get('device', '?')})")
         out += [*markdown_table(header, table), ""]
     return out
 
@@ -340,15 +345,19 @@ def _swept(results: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _devices(machine: dict[str, Any]) -> str:
+    return "; ".join(
+        f"{name}: {info.get('unavailable') or info.get('renderer') or info.get('device') or '?'}"
+        for name, info in machine["backends"].items()
+    )
+
+
 def render_report(results: dict[str, Any]) -> str:
     """The Markdown report of a results document."""
     if results.get("format") != "aberrant-bench":
         raise AberrantError("not an aberrant bench results document")
     m, c = results["machine"], results["config"]
-    devices = "; ".join(
-        f"{name}: {info.get('unavailable') or info.get('renderer') or info.get('device') or '?'}"
-        for name, info in m["backends"].items()
-    )
+    devices = _devices(m)
     load = m.get("load_average", {})
     lines = [
         "# aberrant bench: speed against error",
@@ -361,6 +370,13 @@ def render_report(results: dict[str, Any]) -> str:
         f"{_num(load.get('end'))} at the end (other work on the machine slows frames; ratios less so).",
         "",
     ]
+    machines = results.get("machines", {})
+    if len(machines) > 1:
+        lines[3:5] = [f"**Machines:** {len(machines)}, each cell's named in its label (`@ machine`).  "]
+        for name, info in machines.items():
+            facts = f"{info['cpu']}, {info['cores']} cores; {info['platform']}; {_devices(info)}"
+            lines.insert(-1, f"- **{name}:** {facts}.")
+        lines.insert(-1, "")
     lines += _targets(results) + _headline(results)
     lines += ["## Speed against error", "", "![frame time against error](speed_vs_error.png)", ""]
     lines += [

@@ -22,6 +22,7 @@ from typing import Any, TextIO
 from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
+from aberrant.bench.merge import FORMAT, merge_results, read_results
 from aberrant.bench.metrics import compare
 from aberrant.bench.overhead import measure_overhead
 from aberrant.bench.paired import SPACE_PLOT, has_space
@@ -37,7 +38,6 @@ from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.scene import Scene
 
-FORMAT = "aberrant-bench"
 VERSION = 1
 DEFAULT_BACKENDS: tuple[str, ...] = ("glsl", "opencl")
 FULL_SIZE, QUICK_SIZE = (800, 800), (96, 72)
@@ -143,7 +143,7 @@ def asset_dir() -> Path:
 # --- the run ---------------------------------------------------------------------------------------------
 
 
-def _plan(config: BenchConfig) -> list[Setting]:
+def plan(config: BenchConfig) -> list[Setting]:
     out: list[Setting] = []
     for name in config.backends:
         precisions = list(backend_class(name).precisions)
@@ -151,7 +151,7 @@ def _plan(config: BenchConfig) -> list[Setting]:
     return out
 
 
-def _cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
+def scene_cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
     """A fixed-size scene skips the size sweep (only its own size tests what it is for); a ``base_only`` one
     every sweep (it is a point of its own)."""
     if spec.base_only:
@@ -163,7 +163,7 @@ def _reference_keys(
     spec: SceneSpec, config: BenchConfig, settings: list[Setting]
 ) -> list[tuple[int | None, tuple[int, int]]]:
     """The (max_events, size) of every reference frame the scene's cells compare with."""
-    cells = _cells(spec, settings)
+    cells = scene_cells(spec, settings)
     return sorted({(s.max_events, spec.size or s.size_for(config.size)) for s in cells}, key=str)
 
 
@@ -227,7 +227,7 @@ def _unmeasured(
     return info, {"status": why}, rows
 
 
-def _measure_scene(
+def measure_scene(
     spec: SceneSpec,
     config: BenchConfig,
     settings: list[Setting],
@@ -237,7 +237,7 @@ def _measure_scene(
     progress: Progress,
 ) -> tuple[dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
     """Embree (on a Euclidean scene), then every cell; a scene that fails to build gives error cells."""
-    todo = _cells(spec, settings)
+    todo = scene_cells(spec, settings)
     scene: Scene | None = None
     try:
         scene = spec.build(asset_dir())
@@ -281,14 +281,14 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
     stream = stream if stream is not None else sys.stderr
     started = time.time()
     load_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
-    settings = _plan(config)
+    settings = plan(config)
     refs = ReferenceCache()
     cells = CellRunner(refs, config.repeat)
     probes = {name: cells.probe(name) for name in config.backends}
     machine = machine_info(config.backends, probes)
     embree_reason = embree.available() if config.embree else "embree: disabled"
     anchor = embree.EmbreeAnchor(config.repeat) if embree_reason is None else None
-    total = sum(len(_cells(spec, settings)) for spec in config.scenes)
+    total = sum(len(scene_cells(spec, settings)) for spec in config.scenes)
     progress = Progress(total, stream)
     if config.jobs > 1:
         render_references(config, settings, progress)
@@ -300,41 +300,71 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
         for spec in config.scenes:
             if config.time_limit_s is not None and time.time() - started > config.time_limit_s:
                 why = f"skipped: the run's time limit ({config.time_limit_s:g} s) was reached"
-                info, scene_anchor, scene_rows = _unmeasured(spec, config, _cells(spec, settings), why, progress)
+                info, scene_anchor, scene_rows = _unmeasured(spec, config, scene_cells(spec, settings), why, progress)
             else:
-                info, scene_anchor, scene_rows = _measure_scene(
+                info, scene_anchor, scene_rows = measure_scene(
                     spec, config, settings, cells, anchor, embree_reason, progress
                 )
             scenes[spec.name], anchors[spec.name] = info, scene_anchor
-            rows += scene_rows
+            rows += stamp(scene_rows, machine)
         overhead = []
         if config.overhead:
             for name in config.backends:
                 progress.show(f"engine overhead: {name}")
-                try:
-                    overhead.append(measure_overhead(name, "f32" if "f32" in backend_class(name).precisions else None))
-                except BackendUnavailable as e:  # the report says why
-                    overhead.append({"backend": name, "status": f"unsupported: {' '.join(str(e).split())}"})
-                except Exception as e:  # recorded, never fatal
-                    overhead.append({"backend": name, "status": f"error: {type(e).__name__}: {e}"})
+                overhead.append(overhead_row(name))
     finally:
         progress.finish()
         if anchor is not None:
             anchor.close()
     machine["load_average"] = {"start": load_start, "end": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
+    results = document(config, started, settings, scenes, anchors, rows, overhead, {machine["name"]: machine})
+    results["reference_cache"] = {"folder": str(refs.folder), "hits": refs.hits, "misses": refs.misses}
+    return results
+
+
+def overhead_row(name: str) -> dict[str, Any]:
+    """The engine-overhead measurement of one backend, or why there is none (never fatal)."""
+    try:
+        return measure_overhead(name, "f32" if "f32" in backend_class(name).precisions else None)
+    except BackendUnavailable as e:  # the report says why
+        return {"backend": name, "status": f"unsupported: {' '.join(str(e).split())}"}
+    except Exception as e:  # recorded, never fatal
+        return {"backend": name, "status": f"error: {type(e).__name__}: {e}"}
+
+
+def stamp(rows: list[dict[str, Any]], machine: dict[str, Any]) -> list[dict[str, Any]]:
+    """Each row told the machine and the device it ran on (results from several machines stay apart)."""
+    for row in rows:
+        info = machine["backends"].get(row["backend"], {})
+        row["machine"] = machine["name"]
+        row["device"] = info.get("unavailable") or info.get("renderer") or info.get("device") or "?"
+    return rows
+
+
+def document(
+    config: BenchConfig,
+    started: float,
+    settings: list[Setting],
+    scenes: dict[str, Any],
+    anchors: dict[str, Any],
+    rows: list[dict[str, Any]],
+    overhead: list[dict[str, Any]],
+    machines: dict[str, dict[str, Any]],
+) -> dict[str, Any]:
+    """The results document; ``machine`` is the first machine's facts, ``machines`` every one's by name."""
     return {
         "format": FORMAT,
         "version": VERSION,
         "started": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(started)),
         "duration_s": time.time() - started,
         "config": config.as_dict(),
-        "machine": machine,
+        "machine": next(iter(machines.values())),
+        "machines": machines,
         "settings": [s.as_dict() for s in settings],
         "scenes": scenes,
         "embree": anchors,
         "rows": rows,
         "overhead": overhead,
-        "reference_cache": {"folder": str(refs.folder), "hits": refs.hits, "misses": refs.misses},
     }
 
 
@@ -383,21 +413,22 @@ def write_outputs(results: dict[str, Any], out: Path) -> list[Path]:
     return list(files)
 
 
-def rerender(results_path: Path, out: Path) -> list[Path]:
-    """Write the report and plot again from an earlier run's results.json (no measuring)."""
-    try:
-        results = json.loads(Path(results_path).read_text())
-    except (OSError, ValueError) as e:
-        raise AberrantError(f"--from-results {results_path}: cannot read it ({e})") from None
-    if not isinstance(results, dict) or results.get("format") != FORMAT:
-        raise AberrantError(f"--from-results {results_path}: not an aberrant bench results.json")
-    results.pop("plot_note", None)
-    return write_outputs(results, out)
+def rerender(results_paths: Path | list[Path], out: Path) -> list[Path]:
+    """Write the report and plot again from earlier runs' results.json (no measuring); several are merged."""
+    paths = [Path(results_paths)] if isinstance(results_paths, str | os.PathLike) else [Path(p) for p in results_paths]
+    return write_outputs(merge_results([(path, read_results(path)) for path in paths]), out)
 
 
-def bench_command(config: BenchConfig, stream: TextIO | None = None) -> int:
-    """Run, write, and say where the report is; returns the exit status."""
-    results = run_bench(config, stream)
+def bench_command(
+    config: BenchConfig, stream: TextIO | None = None, *, workers: int | None = None, scheduler: str | None = None
+) -> int:
+    """Run (here, or on a Dask cluster given ``workers`` or ``scheduler``), write, and say where the report is."""
+    if workers is None and scheduler is None:
+        results = run_bench(config, stream)
+    else:
+        from aberrant.bench.spread import run_bench_on_cluster
+
+        results = run_bench_on_cluster(config, workers=workers, scheduler=scheduler, stream=stream)
     paths = write_outputs(results, config.out)
     for path in paths:
         print(f"wrote {path}")
