@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from components import Aberration, Mesh, Portal, Transform
+from components import Mesh, Transform
 from engine.errors import AberrantError
 from engine.maths import trs_inverse
 from engine.scene import Scene
+from engine.space_index import SpaceIndex
 
 
 def _to_local(transform: Transform, origin: np.ndarray, direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,16 +61,21 @@ def ray_quad(origin: np.ndarray, direction: np.ndarray) -> float:
     return float(t) if abs(x) <= 1.0 and abs(y) <= 1.0 else np.inf
 
 
-def pick(scene: Scene, origin: np.ndarray, direction: np.ndarray) -> int | None:
+def pick(scene: Scene, origin: np.ndarray, direction: np.ndarray, index: SpaceIndex | None = None) -> int | None:
     """The entity under the ray.
 
     Meshes and portal quads: the nearest surface. An aberration box wins
     only when whatever surface the ray meets lies behind the whole box, so
     a mesh inside a box is still clicked through it; boxes around the view
     are picked from the hierarchy instead.
+
+    Portals and boxes are found through ``index`` (synced here; the editor keeps one so that a click costs
+    what the ray passes, not the scene's count), only up to the nearest surface found so far: nothing
+    further can win. Without one, a fresh index is built.
     """
     origin = np.asarray(origin, dtype=np.float64)
     direction = np.asarray(direction, dtype=np.float64)
+    index = (index or SpaceIndex()).sync(scene)
     best_t, best = np.inf, None
     for entity, (transform, mesh) in scene.query(Transform, Mesh):
         try:
@@ -82,13 +88,13 @@ def pick(scene: Scene, origin: np.ndarray, direction: np.ndarray) -> int | None:
         t = ray_triangles(o, d, v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
         if t < best_t:  # the same t in both spaces: the local direction is the mapped world one
             best_t, best = t, entity
-    for entity, (transform, _) in scene.query(Transform, Portal):
-        t = ray_quad(*_to_local(transform, origin, direction))
+    for entity in index.portals_on_ray(origin, direction, best_t):
+        t = ray_quad(*_to_local(scene.get(entity, Transform), origin, direction))
         if t < best_t:
             best_t, best = t, entity
     box_t, box = np.inf, None
-    for entity, (transform, _) in scene.query(Transform, Aberration):
-        enter, leave = ray_box(*_to_local(transform, origin, direction))
+    for entity in index.boxes_on_ray(origin, direction, best_t):  # a winner leaves the box before best_t
+        enter, leave = ray_box(*_to_local(scene.get(entity, Transform), origin, direction))
         if 0.0 < enter < box_t and leave < best_t:
             box_t, box = enter, entity
     return box if box is not None else best

@@ -1,25 +1,19 @@
 """The preview pass: meshes rasterised to depth (optionally flat-shaded), then debug lines depth-tested on them.
 
-Aberration boxes (12 edges) and portal quads (4 edges) are drawn in their
-own colour where ``debug_draw`` is on, the selection in white, the scene
-camera as a small frustum. Lines are drawn straight in undeformed space:
-they show where an entity *is*, whatever the tracer makes it look like.
-Over a traced frame only the lines are visible (the meshes write depth
-only); in "raster" mode the meshes are flat-shaded too, which is fast
-enough to use while dragging when the tracer is not.
-
-:func:`preview_lines` and :func:`thick_lines` are plain NumPy (tested
-without a GL context); :class:`PreviewRenderer` does the GL work.
+The lines are :mod:`editor.overlay`'s: only what the view's frustum holds, each
+entity's outline kept until it changes. Over a traced frame only the lines are
+visible (the meshes write depth only); in "raster" mode the meshes are
+flat-shaded too, which is fast enough to use while dragging when the tracer is not.
 """
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Mesh, Transform
+from editor.overlay import SELECTION_COLOR, Outlines, selection_edges, thick_lines, view_planes
 from editor.view import perspective, view_matrix
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
@@ -28,142 +22,6 @@ from engine.scene import Scene
 
 if TYPE_CHECKING:
     import moderngl
-
-#: Line width in pixels.
-LINE_WIDTH = 2.0
-SELECTION_COLOR = (1.0, 1.0, 1.0)
-CAMERA_COLOR = (0.85, 0.85, 0.85)
-#: Inert portals (no target) are drawn at this fraction of their colour.
-INERT_DIM = 0.45
-
-_BOX_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
-_BOX_EDGES = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
-_QUAD_CORNERS = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
-
-
-def _edges(corners: np.ndarray, pairs: list[tuple[int, int]]) -> np.ndarray:
-    return np.array([[corners[a], corners[b]] for a, b in pairs])
-
-
-def _placed(transform: Transform, local: np.ndarray) -> np.ndarray:
-    m = trs_matrix(transform.position, transform.rotation, transform.scale)
-    return local @ m[:3, :3].T + m[:3, 3]
-
-
-def box_edges(transform: Transform, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> np.ndarray:
-    """The 12 world edges (12, 2, 3) of the unit box, or of the local box ``[lo, hi]``, placed by ``transform``."""
-    corners = _BOX_CORNERS
-    if lo is not None and hi is not None:
-        corners = (corners + 0.5) * (hi - lo) + lo
-    return _placed(transform, _edges(corners, _BOX_EDGES).reshape(-1, 3)).reshape(-1, 2, 3)
-
-
-def quad_edges(transform: Transform) -> np.ndarray:
-    """The 4 world edges (4, 2, 3) of a portal quad."""
-    pairs = [(0, 1), (1, 2), (2, 3), (3, 0)]
-    return _placed(transform, _edges(_QUAD_CORNERS, pairs).reshape(-1, 3)).reshape(-1, 2, 3)
-
-
-def camera_edges(transform: Transform, camera: Camera, aspect: float = 4 / 3, depth: float = 0.6) -> np.ndarray:
-    """A small frustum (8 edges) showing where the scene camera stands and looks."""
-    t = math.tan(math.radians(camera.fov_deg) / 2.0) * depth
-    far = np.array(
-        [[-aspect * t, -t, -depth], [aspect * t, -t, -depth], [aspect * t, t, -depth], [-aspect * t, t, -depth]]
-    )
-    pts = np.vstack([np.zeros((1, 3)), far])
-    pairs = [(0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1)]
-    rigid = Transform(transform.position, transform.rotation)
-    return _placed(rigid, _edges(pts, pairs).reshape(-1, 3)).reshape(-1, 2, 3)
-
-
-def preview_lines(
-    scene: Scene, selected: int | None = None, *, show_camera: bool = True
-) -> tuple[np.ndarray, np.ndarray]:
-    """World segments ``(N, 2, 3)`` and their colours ``(N, 3)`` for the debug overlay."""
-    segments: list[np.ndarray] = []
-    colors: list[np.ndarray] = []
-
-    def add(edges: np.ndarray, color: tuple[float, float, float]) -> None:
-        segments.append(edges)
-        colors.append(np.tile(np.asarray(color, dtype=np.float64), (len(edges), 1)))
-
-    for entity, (transform, aberration) in scene.query(Transform, Aberration):
-        if aberration.debug_draw and entity != selected:
-            add(box_edges(transform), aberration.color)
-    for entity, (transform, portal) in scene.query(Transform, Portal):
-        if portal.debug_draw and entity != selected:
-            dim = 1.0 if portal.target is not None else INERT_DIM
-            add(quad_edges(transform), tuple(c * dim for c in portal.color))
-    camera = scene.camera_entity
-    if show_camera and camera is not None and camera != selected:
-        add(camera_edges(scene.get(camera, Transform), scene.get(camera, Camera)), CAMERA_COLOR)
-    if selected is not None:
-        segments.extend(selection_edges(scene, selected))
-        colors.extend(np.tile(SELECTION_COLOR, (len(e), 1)) for e in segments[len(colors) :])
-    if not segments:
-        return np.zeros((0, 2, 3)), np.zeros((0, 3))
-    return np.concatenate(segments), np.concatenate(colors)
-
-
-def selection_edges(scene: Scene, entity: int) -> list[np.ndarray]:
-    """The outline of the selected entity: its box, quad, frustum or mesh bounds."""
-    transform = scene.try_get(entity, Transform)
-    if transform is None:
-        return []
-    out = []
-    if scene.has(entity, Aberration):
-        out.append(box_edges(transform))
-    if scene.has(entity, Portal):
-        out.append(quad_edges(transform))
-    camera = scene.try_get(entity, Camera)
-    if camera is not None:
-        out.append(camera_edges(transform, camera))
-    mesh = scene.try_get(entity, Mesh)
-    if mesh is not None:
-        try:
-            lo, hi = scene.asset(mesh.asset).bounds()
-        except AberrantError:
-            return out
-        pad = 0.01 * np.maximum(hi - lo, 1e-3)
-        out.append(box_edges(transform, lo.astype(np.float64) - pad, hi.astype(np.float64) + pad))
-    return out
-
-
-def thick_lines(
-    segments: np.ndarray, colors: np.ndarray, view_proj: np.ndarray, size: tuple[int, int], width: float = LINE_WIDTH
-) -> np.ndarray:
-    """Screen-space quads for the segments: ``(6 * N, 7)`` float32 rows of clip position and colour.
-
-    Each segment is clipped against the near plane first (the view is often
-    inside an aberration box), then widened by ``width`` pixels on screen.
-    """
-    if len(segments) == 0:
-        return np.zeros((0, 7), np.float32)
-    ones = np.ones((len(segments), 2, 1))
-    clip = np.concatenate([segments, ones], axis=2) @ view_proj.T  # (N, 2, 4)
-    d = clip[:, :, 2] + clip[:, :, 3]  # >= 0 in front of the near plane
-    keep = (d[:, 0] > 0) | (d[:, 1] > 0)
-    clip, d, colors = clip[keep], d[keep], colors[keep]
-    for a, b in ((0, 1), (1, 0)):
-        behind = d[:, a] <= 0
-        t = d[behind, a] / (d[behind, a] - d[behind, b])
-        clip[behind, a] = clip[behind, a] + t[:, None] * (clip[behind, b] - clip[behind, a])
-    w = np.maximum(clip[:, :, 3], 1e-9)
-    ndc = clip[:, :, :2] / w[:, :, None]
-    px = np.array([size[0] / 2.0, size[1] / 2.0])
-    direction = (ndc[:, 1] - ndc[:, 0]) * px
-    length = np.linalg.norm(direction, axis=1)
-    ok = length > 1e-9
-    clip, colors, direction, length, w = clip[ok], colors[ok], direction[ok], length[ok], w[ok]
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None]
-    offset = normal * (width / 2.0) / px  # NDC units
-    corners = []
-    for end, side in ((0, -1), (0, 1), (1, 1), (0, -1), (1, 1), (1, -1)):
-        c = clip[:, end].copy()
-        c[:, :2] += side * offset * w[:, end, None]
-        corners.append(np.concatenate([c, colors], axis=1))
-    return np.stack(corners, axis=1).reshape(-1, 7).astype(np.float32)
-
 
 _MESH_VS = """
 #version 330
@@ -237,6 +95,8 @@ class PreviewRenderer:
         self._key: tuple[object, ...] | None = None
         #: Preview passes drawn (a still scene draws one).
         self.renders = 0
+        #: The boxes' and portals' outlines, kept per entity version; a frame looks only at what its view shows.
+        self.outlines = Outlines()
 
     def _target(self, size: tuple[int, int]) -> moderngl.Framebuffer:
         if self._fbo is None or self.size != size:
@@ -322,7 +182,7 @@ class PreviewRenderer:
         fbo.depth_mask = False
         fbo.use()
         view_proj = proj @ world_to_view
-        segments, colors = preview_lines(scene, selected)
+        segments, colors = self.outlines.lines(scene, selected, planes=view_planes(view_proj, size))
         self._draw_lines(thick_lines(segments, colors, view_proj, size), 1.0)
         if selected is not None:  # the hidden part of the selection, faintly: where it is behind a wall
             hidden = selection_edges(scene, selected)

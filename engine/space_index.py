@@ -1,7 +1,8 @@
-"""Where a scene's portals and aberration boxes are, in world space, for the camera's walk each tick.
+"""Where a scene's portals and aberration boxes are, in world space, for the camera's walk and the editor.
 
 The camera's movement asks which boxes hold a point and which box faces its step crosses; its teleport,
-which portal quads its path passes through. A loop over every portal and box per tick grows with the
+which portal quads its path passes through; the editor's picking, what a click ray meets, and its preview,
+what the view's frustum holds. A loop over every portal and box per tick grows with the
 scene; this index keeps two dynamic AABB trees (:class:`engine.tlas.AabbTree`, world coordinates) in
 step with the scene's change journal, so a query costs what is near the camera, and a tick the entities
 that changed since the last one. Each indexed entity has a version, bumped when it changes, for the
@@ -125,6 +126,22 @@ class SpaceIndex:
     def boxes_on_segment(self, start: np.ndarray, end: np.ndarray) -> list[int]:
         """Aberration entities whose box the segment may meet (a superset), in creation order."""
         return self._boxes.pick(self._boxes.tree.rows_on_segment(start, end))
+
+    def portals_on_ray(self, origin: np.ndarray, direction: np.ndarray, t_max: float = np.inf) -> list[int]:
+        """Portal entities whose quad the ray may cross within ``t_max`` (a superset), in creation order."""
+        return self._portals.pick(self._portals.tree.rows_on_ray(origin, direction, t_max))
+
+    def boxes_on_ray(self, origin: np.ndarray, direction: np.ndarray, t_max: float = np.inf) -> list[int]:
+        """Aberration entities whose box the ray may meet within ``t_max`` (a superset), in creation order."""
+        return self._boxes.pick(self._boxes.tree.rows_on_ray(origin, direction, t_max))
+
+    def portals_in_planes(self, planes: np.ndarray) -> list[int]:
+        """Portal entities whose quad may lie inside the planes (a view's frustum; a superset), in creation order."""
+        return self._portals.pick(self._portals.tree.rows_in_planes(planes))
+
+    def boxes_in_planes(self, planes: np.ndarray) -> list[int]:
+        """Aberration entities whose box may reach inside the planes (a superset), in creation order."""
+        return self._boxes.pick(self._boxes.tree.rows_in_planes(planes))
 
     @property
     def portal_count(self) -> int:

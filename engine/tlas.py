@@ -267,19 +267,28 @@ class AabbTree:
 
     def rows_on_segment(self, start: np.ndarray, end: np.ndarray, pad: float = 0.0) -> list[int]:
         """Rows whose fat box, grown by ``pad``, the segment from ``start`` to ``end`` meets (sorted)."""
+        a = np.asarray(start, np.float64)
+        return self.rows_on_ray(a, np.asarray(end, np.float64) - a, 1.0, pad)
+
+    def rows_on_ray(
+        self, origin: np.ndarray, direction: np.ndarray, t_max: float = np.inf, pad: float = 0.0
+    ) -> list[int]:
+        """Rows whose fat box, grown by ``pad``, the ray ``origin + t * direction`` meets for some ``t`` in
+        ``[0, t_max]`` (sorted); ``t_max`` may be infinite (an editor's pick ray)."""
         if not len(self.leaf):
             return []
-        a = np.asarray(start, np.float64)
-        d = np.asarray(end, np.float64) - a
-        seg_lo, seg_hi = np.minimum(a, a + d) - pad, np.maximum(a, a + d) + pad
-        with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.asarray(origin, np.float64)
+        d = np.asarray(direction, np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):  # an infinite ray: inf * 0 where it does not move
+            end = np.where(d == 0.0, a, a + t_max * d)
             inv = 1.0 / d
+        seg_lo, seg_hi = np.minimum(a, end) - pad, np.maximum(a, end) + pad
 
         def meets(lo: np.ndarray, hi: np.ndarray) -> bool:
             if np.any(hi < seg_lo) or np.any(lo > seg_hi):
                 return False
             lo, hi = lo - pad, hi + pad
-            t_in, t_out = 0.0, 1.0
+            t_in, t_out = 0.0, t_max
             for k in range(3):
                 if d[k] == 0.0:
                     if a[k] < lo[k] or a[k] > hi[k]:
@@ -299,6 +308,19 @@ class AabbTree:
         """Rows whose fat box overlaps the closed box ``lo``/``hi`` (sorted)."""
         qlo, qhi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
         return self._collect(lambda nlo, nhi: bool(np.all(nlo <= qhi) and np.all(qlo <= nhi)))
+
+    def rows_in_planes(self, planes: np.ndarray) -> list[int]:
+        """Rows whose fat box is not wholly on the negative side of any plane ``(a, b, c, d)``: ``a x + b y +
+        c z + d >= 0`` inside (a view frustum's six planes, sorted)."""
+        planes = np.asarray(planes, np.float64).reshape(-1, 4)
+        normals, offsets = planes[:, :3], planes[:, 3]
+        positive = normals >= 0.0
+
+        def keep(lo: np.ndarray, hi: np.ndarray) -> bool:
+            corner = np.where(positive, hi, lo)  # per plane, the box's corner furthest along its normal
+            return bool(np.all(np.einsum("ij,ij->i", normals, corner) + offsets >= 0.0))
+
+        return self._collect(keep)
 
     def _collect(self, keep: Callable[[np.ndarray, np.ndarray], bool]) -> list[int]:
         return collect(self.nodes, 0, keep) if len(self.leaf) else []

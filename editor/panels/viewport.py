@@ -23,6 +23,7 @@ from editor.panels.shell import EditorShell
 from editor.picking import pick
 from editor.play import Keys
 from editor.view import column_major, perspective, view_matrix
+from engine.space_index import SpaceIndex
 
 gizmo = imguizmo.im_guizmo
 
@@ -87,6 +88,8 @@ class ViewportPanel:
         #: Mouse buttons (left, right, middle) pressed inside the viewport and not yet released.
         self._held = [False, False, False]
         self._released = [False, False, False]
+        #: The scene's portals and boxes in trees, kept across clicks (a click syncs it: O(changes), not O(N)).
+        self.space = SpaceIndex()
 
     # --- drawing -------------------------------------------------------------------------
 
@@ -216,7 +219,7 @@ class ViewportPanel:
         mouse = imgui.get_mouse_pos()
         x, y = mouse.x - self.origin[0], mouse.y - self.origin[1]
         origin, direction = shell.view.ray(x, y, *self.size)
-        shell.model.select(pick(shell.model.scene, origin, direction))
+        shell.model.select(pick(shell.model.scene, origin, direction, self.space))
 
     def _gizmo(self, shell: EditorShell, pos: imgui.ImVec2) -> None:
         model = shell.model

@@ -11,8 +11,8 @@ from components import Aberration, Portal, Transform
 from editor.backend_host import BackendHost
 from editor.gizmo import matrix_to_transform, transform_matrix
 from editor.model import EditorModel
+from editor.overlay import preview_lines, thick_lines
 from editor.picking import pick
-from editor.preview import preview_lines, thick_lines
 from editor.view import EditorView, perspective, view_matrix
 from engine.maths import quat_from_euler_deg, trs_matrix
 from engine.scene import Scene
