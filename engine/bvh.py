@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from engine.bvh_split import half_area, split_references
 from engine.layout import BVH_NODE_DTYPE, BVH_WIDTHS
 
 __all__ = [
@@ -70,12 +71,6 @@ class BvhParams:
             x = getattr(self, name)
             if not isinstance(x, int | float) or isinstance(x, bool) or not 0 <= x < np.inf:
                 raise ValueError(f"BvhParams.{name} must be a finite number >= 0, got {x!r}")
-
-
-def half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Half the surface area of boxes, xyz on the FIRST axis; empty boxes (lo > hi) give 0."""
-    d = np.maximum(hi.astype(np.float64) - lo, 0.0)
-    return d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
 
 
 def _sweep(a: np.ndarray, op: np.ufunc, reverse: bool = False) -> np.ndarray:
@@ -264,8 +259,6 @@ def build_bvh(vertices: np.ndarray, faces: np.ndarray, params: BvhParams = BvhPa
     cent = corners.sum(axis=1, dtype=np.float64) / 3.0
     ref_tri = None
     if params.split_ratio > 0:
-        from engine.bvh_split import split_references
-
         ref_tri, lo, hi = split_references(corners, lo, hi, params.split_ratio, params.split_budget)
         if len(ref_tri) == len(tris):
             ref_tri = None  # nothing split: the same tree as without splitting

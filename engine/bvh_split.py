@@ -15,9 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.bvh import half_area
+__all__ = ["half_area", "split_references"]
 
-__all__ = ["split_references"]
+
+def half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Half the surface area of boxes, xyz on the FIRST axis; empty boxes (lo > hi) give 0."""
+    d = np.maximum(hi.astype(np.float64) - lo, 0.0)
+    return d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
 
 
 def _pieces(box_area: np.ndarray, tri_area: np.ndarray, ratio: float, budget: float) -> np.ndarray:

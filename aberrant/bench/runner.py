@@ -31,7 +31,7 @@ from aberrant.bench.reference import ReferenceCache, render_ahead
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
-from aberrant.progress import Progress, clock
+from aberrant.progress import Progress
 from backends.base import BACKENDS, backend_class
 from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
@@ -417,20 +417,3 @@ def rerender(results_paths: Path | list[Path], out: Path) -> list[Path]:
     """Write the report and plot again from earlier runs' results.json (no measuring); several are merged."""
     paths = [Path(results_paths)] if isinstance(results_paths, str | os.PathLike) else [Path(p) for p in results_paths]
     return write_outputs(merge_results([(path, read_results(path)) for path in paths]), out)
-
-
-def bench_command(
-    config: BenchConfig, stream: TextIO | None = None, *, workers: int | None = None, scheduler: str | None = None
-) -> int:
-    """Run (here, or on a Dask cluster given ``workers`` or ``scheduler``), write, and say where the report is."""
-    if workers is None and scheduler is None:
-        results = run_bench(config, stream)
-    else:
-        from aberrant.bench.spread import run_bench_on_cluster
-
-        results = run_bench_on_cluster(config, workers=workers, scheduler=scheduler, stream=stream)
-    paths = write_outputs(results, config.out)
-    for path in paths:
-        print(f"wrote {path}")
-    print(f"bench: {len(results['rows'])} cells in {clock(results['duration_s'])}")
-    return 0
