@@ -196,7 +196,7 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
             ax.scatter(
                 p.time_ms,
                 y_of(p),
-                marker=MARKERS.get(p.backend, "x"),
+                marker=MARKERS.get(p.backend.split(" @ ")[0], "x"),  # merged runs label backends "name @ machine"
                 s=150 if p.backend == "embree" else 45,
                 color=color,
                 edgecolor="black",
@@ -232,18 +232,27 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
             ax.set_yscale("symlog", linthresh=1e-2, linscale=0.5)
             ax.axhline(100 * MISMATCH_MAX_EUCLIDEAN, color="#d62728", ls=":", lw=1)
             ax.text(
-                ax.get_xlim()[0],
+                0.0,
                 100 * MISMATCH_MAX_EUCLIDEAN,
                 " parity threshold (Euclidean)",
                 fontsize=8,
                 color="#d62728",
                 va="bottom",
+                transform=ax.get_yaxis_transform(),  # x in axes units: at the left edge whatever the data
             )
             ax.set_ylim(-1e-3, max(1.0, 2 * max((p.mismatch_pct for p in pts), default=0.0)))
         else:
             ax.set_yscale("log")
             ax.axhline(DEPTH_P99_MAX, color="#d62728", ls=":", lw=1)
-            ax.text(ax.get_xlim()[0], DEPTH_P99_MAX, " parity threshold", fontsize=8, color="#d62728", va="bottom")
+            ax.text(
+                0.0,
+                DEPTH_P99_MAX,
+                " parity threshold",
+                fontsize=8,
+                color="#d62728",
+                va="bottom",
+                transform=ax.get_yaxis_transform(),
+            )
             ax.set_ylim(floor / 3, max(1e-2, 10 * max((p.depth_p99 for p in pts), default=0.0)))
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if str(f"{v:g}")[0] in "25" else ""))
