@@ -230,6 +230,7 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
         ax.set_xscale("log")
         if attr == "mismatch_pct":
             ax.set_yscale("symlog", linthresh=1e-2, linscale=0.5)
+            ax.set_ylim(-1e-3, max(1.0, 2 * max((p.mismatch_pct for p in pts), default=0.0)))
             ax.axhline(100 * MISMATCH_MAX_EUCLIDEAN, color="#d62728", ls=":", lw=1)
             ax.text(
                 0.0,
@@ -240,9 +241,10 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
                 va="bottom",
                 transform=ax.get_yaxis_transform(),  # x in axes units: at the left edge whatever the data
             )
-            ax.set_ylim(-1e-3, max(1.0, 2 * max((p.mismatch_pct for p in pts), default=0.0)))
         else:
             ax.set_yscale("log")
+            # Limits before the threshold line: with no points, autoscaling to the line alone would collapse.
+            ax.set_ylim(floor / 3, max(1e-2, 10 * max((p.depth_p99 for p in pts), default=0.0)))
             ax.axhline(DEPTH_P99_MAX, color="#d62728", ls=":", lw=1)
             ax.text(
                 0.0,
@@ -253,7 +255,6 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
                 va="bottom",
                 transform=ax.get_yaxis_transform(),
             )
-            ax.set_ylim(floor / 3, max(1e-2, 10 * max((p.depth_p99 for p in pts), default=0.0)))
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         ax.xaxis.set_minor_formatter(FuncFormatter(lambda v, _: f"{v:g}" if str(f"{v:g}")[0] in "25" else ""))
         ax.set_xlabel("frame time, ms (log; geometric mean over the scenes)")
