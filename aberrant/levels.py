@@ -4,6 +4,7 @@
 
 * a demo name (``aberrant demos`` lists them),
 * a scene file, ``level.json`` (its optional ``camera_path`` is the level's flythrough),
+* a glTF scene, ``level.gltf`` or ``level.glb`` (:mod:`aberrant.importers.gltf`: node extras carry the components),
 * a level module, ``level.py`` or ``level.py:func``: Python that defines
   ``build() -> Scene`` (or the function named after the colon) and optionally
   ``camera_path() -> CameraPath``, e.g. made with :func:`systems.route.route`.
@@ -93,7 +94,8 @@ def split_source(source: str) -> tuple[Path, str] | None:
 
 
 def open_level(source: str | Path) -> Level:
-    """The level ``source`` names: a scene file (``.json``), a level module (``.py[:func]``) or a demo name."""
+    """The level ``source`` names: a scene file (``.json``), a glTF file, a level module (``.py[:func]``) or a demo."""
+    from aberrant.importers.gltf import GLTF_SUFFIXES, load_gltf
     from demos import demo_module, demo_modules
     from engine.scene_file import load_scene
 
@@ -106,6 +108,8 @@ def open_level(source: str | Path) -> Level:
         is_file = path.is_file()
     except OSError:  # a name too long to be a path, say
         is_file = False
+    if path.suffix.lower() in GLTF_SUFFIXES:
+        return Level(load_gltf(path), shorten(path), "scene", file=path)
     if path.suffix.lower() == ".json" or is_file:
         return Level(load_scene(path), shorten(path), "scene", file=path)
     modules = demo_modules()

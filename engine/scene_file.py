@@ -54,6 +54,7 @@ __all__ = [
     "load_scene",
     "save_scene",
     "scene_document",
+    "scene_from_document",
     "scene_to_json",
 ]
 
@@ -451,6 +452,11 @@ def scene_from_text(text: str, file: str, base_dir: Path) -> Scene:
     where = _unencodable_string(doc)
     if where is not None:  # "\ud800" is valid JSON but no Unicode text: it could never be saved again
         raise SceneFileError(file, "a string holds a lone UTF-16 surrogate (\\ud800-\\udfff escape)", field=where)
+    return scene_from_document(doc, file, base_dir)
+
+
+def scene_from_document(doc: object, file: str, base_dir: Path) -> Scene:
+    """A scene from an already parsed scene document (an importer's), validated exactly as a scene file is."""
     return _Reader(file).read(doc, base_dir)
 
 
