@@ -224,8 +224,8 @@ class _Importer:
         """Unique names: a node's own, else ``node<i>``; duplicates get ``.1``, ``.2``..."""
         used: set[str] = set()
         for index, node in enumerate(self.gltf.items("nodes")):
-            base = node.get("name") if isinstance(node, dict) and isinstance(node.get("name"), str) else ""
-            name = base.strip() or f"node{index}"
+            given = node.get("name") if isinstance(node, dict) else None
+            name = (given.strip() if isinstance(given, str) else "") or f"node{index}"
             candidate, n = name, 0
             while candidate in used:
                 n += 1
@@ -242,7 +242,9 @@ class _Importer:
 
     def run(self) -> None:
         self.node_names()
-        stack = [(index, np.eye(4), ()) for index in reversed(self.roots())]
+        stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [
+            (index, np.eye(4), ()) for index in reversed(self.roots())
+        ]
         while stack:
             index, parent, seen = stack.pop()
             node = self.gltf.item("nodes", index, node=None, field="children")
