@@ -18,10 +18,8 @@ import copy
 import io
 import json
 import math
-import signal
 import tempfile
 import warnings
-from collections.abc import Iterator
 from functools import cache
 from pathlib import Path
 from typing import Any
@@ -29,6 +27,7 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_fuzz_meshes import hang_guard
 
 from aberrant.cli import main
 from components import Aberration, Transform
@@ -43,7 +42,6 @@ TELLO = Path(__file__).resolve().parents[2] / "tests" / "data" / "tello"
 TETRA_OBJ = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"
 MESH_FILE = "meshes/tetra.obj"
 #: A load that takes this long is a hang (real loads here take milliseconds).
-HANG_SECONDS = 30
 
 
 def fuzz_settings(examples: int) -> settings:
@@ -55,29 +53,6 @@ def fuzz_settings(examples: int) -> settings:
         deadline=None,
         suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
     )
-
-
-class Hang(BaseException):
-    """A load ran past :data:`HANG_SECONDS` (a BaseException, so no ``except Exception`` in the engine hides it)."""
-
-
-@contextlib.contextmanager
-def hang_guard(seconds: int = HANG_SECONDS) -> Iterator[None]:
-    """Fail instead of hanging forever (POSIX; a generous guard, not a speed assertion)."""
-    if not hasattr(signal, "SIGALRM"):
-        yield
-        return
-
-    def on_alarm(signum: int, frame: object) -> None:
-        raise Hang(f"still running after {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, on_alarm)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def load_or_error(path: Path) -> Scene | SceneFileError:
