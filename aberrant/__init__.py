@@ -50,6 +50,14 @@ anything and written atomically; saving is canonical.
 >>> aberrant.load_scene(folder / "room.json").name_of(crate)
 'crate'
 
+`export_gltf`: a scene as glTF 2.0 (``.glb``) to edit in Blender; every command
+opens it again (`open_level`), as the same scene.
+
+>>> aberrant.export_gltf(scene, folder / "room.glb")
+>>> with aberrant.open_level(folder / "room.glb") as level:
+...     level.scene.get(level.scene.entity("crate"), aberrant.Transform).position
+(0.0, 0.5, -3.0)
+
 `build_demo` / `demo_names`: the demo levels, built as code.
 
 >>> "endless_corridor" in aberrant.demo_names()
@@ -160,6 +168,8 @@ size must be positive, got 0x10
 
 from __future__ import annotations
 
+from aberrant.exporters.gltf import export_gltf
+from aberrant.levels import open_level
 from aberrant.rendering import render
 from backends.base import Frame, create_backend
 from components import Aberration, Camera, Mesh, Portal, Transform
@@ -192,7 +202,9 @@ __all__ = [
     "build_demo",
     "create_backend",
     "demo_names",
+    "export_gltf",
     "load_scene",
+    "open_level",
     "render",
     "route",
     "save_scene",

@@ -1,5 +1,5 @@
 """The ``aberrant`` command line: render a scene or demo (a frame or a flythrough), import
-TelloEngine scenes, list backends, list demos.
+TelloEngine scenes, export glTF, list backends, list demos.
 
 Every error a user can cause (a bad scene file, an unknown backend or demo, a
 bad size, an output folder that does not exist) is one line on stderr,
@@ -38,7 +38,7 @@ MAX_SIDE = 16384
 #: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
 NPZ_AOVS = ("depth", "perceived", "instance", "events")
 #: What a SCENE argument may be (resolved by aberrant/levels.py).
-LEVEL_HELP = "a scene file (.json), a level module (level.py[:func]) or a demo name (see 'aberrant demos')"
+LEVEL_HELP = "a scene file (.json), a glTF file (.glb/.gltf), a level module (level.py[:func]) or a demo name"
 
 T = TypeVar("T")
 
@@ -225,6 +225,25 @@ def cmd_import_tello(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    """``export``: a level as glTF 2.0 for Blender (aberrant/exporters/gltf.py), read back by every command."""
+    from aberrant.exporters.gltf import EXPORT_SUFFIXES, export_gltf
+    from aberrant.levels import open_level
+
+    out = Path(args.out)
+    if out.suffix.lower() not in EXPORT_SUFFIXES:
+        raise UsageError(f"{shorten(out)}: the output must be a .glb or .gltf file")
+    _check_output("OUT", out)
+    from components import Aberration, Mesh, Portal
+
+    with open_level(args.scene) as level:
+        export_gltf(level.scene, out)
+        kinds = ((Mesh, "meshes"), (Aberration, "aberrations"), (Portal, "portals"))
+        counts = ", ".join(f"{len(level.scene.query(kind))} {label}" for kind, label in kinds)
+    print(f"wrote {out} ({counts})")
+    return 0
+
+
 def cmd_backends(args: argparse.Namespace) -> int:
     from backends.base import BACKENDS, backend_class, probe
 
@@ -387,6 +406,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--checker", type=float, default=0.125, help="checker cell size in UV units, like the thesis texture (0: none)"
     )
     tello.set_defaults(func=cmd_import_tello)
+
+    export = sub.add_parser("export", help="write a level as glTF 2.0 (.glb or .gltf) to edit in Blender")
+    export.add_argument("scene", metavar="SCENE", help=LEVEL_HELP)
+    export.add_argument("out", metavar="OUT.glb", help="the file to write (.glb, or .gltf with the buffer embedded)")
+    export.set_defaults(func=cmd_export)
 
     backends = sub.add_parser("backends", help="list the tracer backends and whether they can run here")
     backends.set_defaults(func=cmd_backends)

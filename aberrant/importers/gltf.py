@@ -13,11 +13,21 @@ an object's custom properties. What maps to what:
   values as a scene file's entity components, validated by the scene-file
   reader. A node carrying one is that box or quad; its mesh (the stand-in the
   designer saw in Blender) is not rendered.
+* **Root nodes** given as translation, rotation and scale keep those values
+  exactly (a written scene comes back bit for bit); others are decomposed.
 * **Meshes**: each triangle primitive becomes a mesh entity (``<node>`` or
   ``<node>.<i>`` when a mesh has several), its triangles written as an OBJ in
-  a folder named by the file's content; colour from the material's
-  ``baseColorFactor``, one-sided unless the material is ``doubleSided``.
-* **Camera**: the first node with a camera, its ``yfov`` the vertical field of view.
+  a folder named by the file's content, with its ``TEXCOORD_0`` (V flipped
+  back from glTF's top-left origin); colour from the material's
+  ``baseColorFactor``, one-sided unless the material is ``doubleSided``, the
+  checker cell size from the material extra ``{"aberrant": {"checker": c}}``.
+* **Camera**: the first node with a camera, its ``yfov`` the vertical field of
+  view (to a billionth of a degree), its walking speed the node extra
+  ``{"aberrant": {"camera": {"speed": s}}}``.
+* **Scene extras** ``{"aberrant": {"settings": {...}, "camera_path": [...]}}``:
+  the scene file's sections of the same names.
+
+:mod:`aberrant.exporters.gltf` writes exactly this, so scenes round-trip.
 
 Every problem is one :class:`GltfError` naming the file, the node and the field.
 """
@@ -44,8 +54,10 @@ from engine.scene import Scene
 from engine.scene_file import SceneFileError, scene_from_document
 
 GLTF_SUFFIXES = (".gltf", ".glb")
-#: The keys allowed in a node's ``extras.aberrant`` block.
-COMPONENT_KEYS = ("aberration", "portal")
+#: The keys allowed in a node's ``extras.aberrant`` block (``camera`` on a camera node only).
+COMPONENT_KEYS = ("aberration", "portal", "camera")
+#: The keys allowed in the scene's ``extras.aberrant`` block: scene-file sections.
+SCENE_KEYS = ("settings", "camera_path")
 _COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 _TRIANGLES = 4
@@ -176,6 +188,16 @@ class _Gltf:
         return np.concatenate(rows).view(dtype).reshape(count, width) if count else np.zeros((0, width), dtype)
 
 
+def unique_name(name: str, used: set[str]) -> str:
+    """``name``, or ``name.1``, ``name.2``... when taken; the result is added to ``used``."""
+    candidate, n = name, 0
+    while candidate in used:
+        n += 1
+        candidate = f"{name}.{n}"
+    used.add(candidate)
+    return candidate
+
+
 def _local_matrix(gltf: _Gltf, node: dict[str, Any], name: str) -> np.ndarray:
     try:
         if "matrix" in node:
@@ -190,6 +212,19 @@ def _local_matrix(gltf: _Gltf, node: dict[str, Any], name: str) -> np.ndarray:
     if not np.all(np.isfinite(m)):
         raise gltf.fail("the transform holds NaN or infinity", node=name, field="matrix/translation/rotation/scale")
     return m
+
+
+def _root_trs(node: dict[str, Any]) -> dict[str, list[float]]:
+    """A root node's own TRS as the transform (its matrix was checked already): no decomposition rounding."""
+    rotation = [float(c) for c in node.get("rotation", (0, 0, 0, 1))]
+    norm = math.sqrt(sum(c * c for c in rotation))
+    if abs(norm - 1.0) > 1e-9:
+        rotation = [c / norm for c in rotation]
+    return {
+        "position": [float(c) for c in node.get("translation", (0, 0, 0))],
+        "rotation": rotation,
+        "scale": [float(c) for c in node.get("scale", (1, 1, 1))],
+    }
 
 
 def _decompose(m: np.ndarray) -> dict[str, list[float]]:
@@ -219,19 +254,15 @@ class _Importer:
         }
         self.meshes: dict[str, bytes] = {}
         self.names: dict[int, str] = {}
+        #: Where the scene's settings and camera path came from, for messages.
+        self.scene_field = "scenes[0].extras.aberrant"
 
     def node_names(self) -> None:
         """Unique names: a node's own, else ``node<i>``; duplicates get ``.1``, ``.2``..."""
         used: set[str] = set()
         for index, node in enumerate(self.gltf.items("nodes")):
             given = node.get("name") if isinstance(node, dict) else None
-            name = (given.strip() if isinstance(given, str) else "") or f"node{index}"
-            candidate, n = name, 0
-            while candidate in used:
-                n += 1
-                candidate = f"{name}.{n}"
-            used.add(candidate)
-            self.names[index] = candidate
+            self.names[index] = unique_name((given.strip() if isinstance(given, str) else "") or f"node{index}", used)
 
     def roots(self) -> list[int]:
         scenes = self.gltf.items("scenes")
@@ -240,8 +271,30 @@ class _Importer:
         scene = self.gltf.item("scenes", self.gltf.doc.get("scene", 0), node=None, field="scene")
         return list(scene.get("nodes", []))
 
+    def scene_extras(self, roots: list[int]) -> None:
+        """The default scene's ``extras.aberrant``: settings and a camera path, as in a scene file."""
+        scenes = self.gltf.items("scenes")
+        if not scenes:
+            return
+        index = self.gltf.doc.get("scene", 0)
+        where = f"scenes[{index}].extras"
+        extras = self.gltf.item("scenes", index, node=None, field="scene").get("extras", {})
+        if not isinstance(extras, dict):
+            raise self.gltf.fail("expected an object", field=where)
+        block = extras.get("aberrant", {})
+        if not isinstance(block, dict):
+            raise self.gltf.fail("expected an object", field=f"{where}.aberrant")
+        for key, value in block.items():
+            if key not in SCENE_KEYS:
+                raise self.gltf.fail(
+                    f"unknown key {key!r}; allowed: {', '.join(SCENE_KEYS)}", field=f"{where}.aberrant.{key}"
+                )
+            self.document[key] = value
+        self.scene_field = f"{where}.aberrant"
+
     def run(self) -> None:
         self.node_names()
+        self.scene_extras(self.roots())
         stack: list[tuple[int, np.ndarray, tuple[int, ...]]] = [
             (index, np.eye(4), ()) for index in reversed(self.roots())
         ]
@@ -252,18 +305,27 @@ class _Importer:
             if index in seen:
                 raise self.gltf.fail("the node hierarchy has a cycle", node=name, field="children")
             world = parent @ _local_matrix(self.gltf, node, name)
-            self.add(index, node, name, world)
+            exact = not seen and "matrix" not in node
+            self.add(index, node, name, _root_trs(node) if exact else _decompose(world))
             stack.extend((child, world, (*seen, index)) for child in reversed(node.get("children", [])))
 
-    def add(self, index: int, node: dict[str, Any], name: str, world: np.ndarray) -> None:
-        transform = _decompose(world)
+    def add(self, index: int, node: dict[str, Any], name: str, transform: dict[str, list[float]]) -> None:
         components = self.components(node, name)
+        lens = components.pop("camera", None)
+        if lens is not None and "camera" not in node:
+            raise self.gltf.fail("only a camera node holds camera settings", node=name, field="extras.aberrant.camera")
         if "camera" in node and "camera" not in self.document:
             camera = self.gltf.item("cameras", node["camera"], node=name, field="camera")
             block: dict[str, Any] = {"name": name, "position": transform["position"], "rotation": transform["rotation"]}
             yfov = camera.get("perspective", {}).get("yfov")
             if isinstance(yfov, int | float):
-                block["fov_deg"] = math.degrees(yfov)
+                block["fov_deg"] = round(math.degrees(yfov), 9)
+            if lens is not None:
+                if not isinstance(lens, dict) or set(lens) - {"speed"}:
+                    raise self.gltf.fail(
+                        "expected an object holding only 'speed'", node=name, field="extras.aberrant.camera"
+                    )
+                block.update(lens)
             self.document["camera"] = block
             return
         if components:
@@ -296,7 +358,9 @@ class _Importer:
                     field=f"extras.aberrant.{key}",
                 )
         if len(block) > 1:
-            raise self.gltf.fail("a node is either an aberration or a portal, not both", node=name, field="extras")
+            raise self.gltf.fail(
+                "a node is one of aberration, portal or camera, not several", node=name, field="extras"
+            )
         return dict(block)
 
     def primitive(self, mesh_index: int, i: int, primitive: dict[str, Any], name: str) -> dict[str, Any]:
@@ -315,10 +379,20 @@ class _Importer:
         faces = indices.astype(np.int64).reshape(-1, 3)
         if faces.max() >= len(vertices):
             raise self.gltf.fail("an index is past the last vertex", node=name, field=f"{field}.indices")
+        uvs = None
+        if "TEXCOORD_0" in primitive["attributes"]:
+            uvs = self.gltf.accessor(primitive["attributes"]["TEXCOORD_0"], name, f"{field}.attributes.TEXCOORD_0")
+            if uvs.shape != (len(vertices), 2) or uvs.dtype != np.float32:
+                raise self.gltf.fail(
+                    "expected float VEC2 UVs, one per vertex", node=name, field=f"{field}.attributes.TEXCOORD_0"
+                )
+            uvs = uvs.astype(np.float64)
+            uvs[:, 1] = 1.0 - uvs[:, 1]  # glTF's UV origin is the image's top left, ours the bottom left
         asset = f"mesh{mesh_index}.{i}"
         if asset not in self.document["assets"]:
             self.meshes[f"{asset}.obj"] = mesh_to_obj(
-                TelloMesh(vertices.astype(np.float32), faces, None), f"{self.gltf.file} {field}"
+                TelloMesh(vertices.astype(np.float32), faces, None if uvs is None else uvs.astype(np.float32)),
+                f"{self.gltf.file} {field}",
             )
             self.document["assets"][asset] = {"path": f"{asset}.obj"}
         block: dict[str, Any] = {"asset": asset, "cull_backfaces": True}
@@ -328,14 +402,29 @@ class _Importer:
             if isinstance(factor, list) and len(factor) == 4:
                 block["color"] = [float(c) for c in factor[:3]]
             block["cull_backfaces"] = not material.get("doubleSided", False)
+            extras = material.get("extras", {})
+            checker = extras.get("aberrant", {}).get("checker") if isinstance(extras, dict) else None
+            if checker is not None:
+                if isinstance(checker, int | float) and not isinstance(checker, bool) and checker >= 0:
+                    block["checker"] = checker
+                else:
+                    where = f"materials[{primitive['material']}].extras.aberrant.checker"
+                    raise self.gltf.fail(
+                        f"expected a cell size >= 0 (0: none), got {checker!r}", node=name, field=where
+                    )
         return block
 
 
 def gltf_document(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, bytes]]:
     """The scene document of a glTF file and its meshes' OBJ files (names relative to the document)."""
+    document, meshes, _ = _imported(path)
+    return document, meshes
+
+
+def _imported(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, bytes], str]:
     importer = _Importer(_Gltf(Path(path)))
     importer.run()
-    return importer.document, importer.meshes
+    return importer.document, importer.meshes, importer.scene_field
 
 
 def load_gltf(path: str | os.PathLike[str], mesh_dir: Path | None = None) -> Scene:
@@ -345,7 +434,7 @@ def load_gltf(path: str | os.PathLike[str], mesh_dir: Path | None = None) -> Sce
     writes nothing. Raises :class:`GltfError` naming the file, the node and the field.
     """
     path = Path(path)
-    document, meshes = gltf_document(path)
+    document, meshes, scene_field = _imported(path)
     if mesh_dir is None:
         digest = hashlib.sha256(path.read_bytes() + json.dumps(document, sort_keys=True).encode()).hexdigest()
         mesh_dir = default_cache_dir() / "gltf" / digest[:32]
@@ -357,7 +446,10 @@ def load_gltf(path: str | os.PathLike[str], mesh_dir: Path | None = None) -> Sce
         return scene_from_document(document, shorten(path), mesh_dir)
     except SceneFileError as e:
         field = e.field
-        if field and field.split(".")[0] in COMPONENT_KEYS:
+        top = (field or "").split(".")[0].split("[")[0]
+        if top in COMPONENT_KEYS:
             field = f"extras.aberrant.{field}"
+        elif top in SCENE_KEYS:
+            field = f"{scene_field}.{field}"
         kind = "node" if e.kind == "entity" else e.kind
         raise GltfError(str(SceneFileError(e.file, e.detail, entity=e.entity, field=field, kind=kind))) from None

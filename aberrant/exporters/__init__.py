@@ -1,0 +1,1 @@
+"""Writers of scenes to other formats (glTF)."""
