@@ -229,3 +229,24 @@ def test_hostile_extras_are_one_line_naming_file_node_and_field(tmp_path, capsys
     for needle in needles:
         assert needle in err, err
     assert not (tmp_path / "f.png").exists()
+
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "blender"
+
+
+def test_the_blender_example_is_what_its_script_makes_and_renders_through_its_portal(tmp_path, reference):
+    import subprocess
+    import sys
+
+    made = tmp_path / "two_rooms.glb"
+    env = {**os.environ, "PYTHONPATH": str(EXAMPLE.parents[1])}
+    subprocess.run([sys.executable, str(EXAMPLE / "make_two_rooms.py"), str(made)], check=True, env=env, timeout=120)
+    assert made.read_bytes() == (EXAMPLE / "two_rooms.glb").read_bytes()  # the checked-in file is reproducible
+    scene = load_gltf(EXAMPLE / "two_rooms.glb")
+    try:
+        assert len(scene.query(Portal)) == 2 and len(scene.query(Aberration)) == 1
+        frame = render_once(scene, reference, (64, 48))
+    finally:
+        scene.close()
+    events = frame.aov("events")
+    assert (events > 0).any() and (events == 0).mean() > 0.5  # the doorway shows the other room, the rest is room A
