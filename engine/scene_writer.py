@@ -128,11 +128,11 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
         entities.append(item)
     doc["entities"] = entities
     if scene.camera_path:
-        doc["camera_path"] = [_keyframe(key) for key in scene.camera_path]
+        doc["camera_path"] = [keyframe_document(key) for key in scene.camera_path]
     return doc
 
 
-def _keyframe(key: Keyframe) -> dict[str, Any]:
+def keyframe_document(key: Keyframe) -> dict[str, Any]:
     """One keyframe as the file holds it: its rotation in the form it was given (a quaternion or a point)."""
     out: dict[str, Any] = {"time": float(key.time), "position": _floats(tuple(key.position))}
     if key.look_at is not None:

@@ -26,7 +26,7 @@ from engine.errors import AberrantError
 from engine.scene import Scene
 from systems.camera_movement import SpeedBox, active_box, first_face_crossing, speed_boxes
 from systems.camera_path import CameraPath, Keyframe
-from systems.portal_teleport import portal_links, segment_crossing
+from systems.portal_teleport import PortalLink, portal_links, segment_crossing
 
 #: Walking pace (perceived units per second) and turning rate (degrees per second) of the stops' timing.
 PACE = 2.0
@@ -62,6 +62,28 @@ def perceived(boxes: Sequence[SpeedBox], start: np.ndarray, end: np.ndarray) -> 
     raise AberrantError("a route leg crosses too many aberration faces")
 
 
+def walk_leg(
+    boxes: Sequence[SpeedBox], frame: np.ndarray, start: np.ndarray, end: np.ndarray, via: PortalLink | None = None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The path step (path frame) that walks straight from world ``start`` to ``end``, and the frame after it.
+
+    ``frame`` turns world deltas into path deltas. With ``via``, ``end`` lies beyond that portal: the walk
+    goes to ``end`` as seen from this side, through the quad, and the frame turns with the portal's
+    rotation; ``None`` when that straight walk misses the quad.
+    """
+    if via is None:
+        return frame @ perceived(boxes, start, end), frame
+    inverse = np.linalg.inv(via.transfer)
+    virtual = inverse[:3, :3] @ end + inverse[:3, 3]  # ``end`` as seen from this side of the portal
+    t = segment_crossing(via, start, virtual)
+    if t is None:
+        return None
+    crossing = start + t * (virtual - start)
+    step = frame @ perceived(boxes, start, crossing)
+    frame = frame @ via.rotation.T
+    return step + frame @ perceived(boxes, via.map_point(crossing), end), frame
+
+
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
     cos = float(np.dot(a, b) / (np.linalg.norm(a) * np.linalg.norm(b)))
     return math.degrees(math.acos(min(1.0, max(-1.0, cos))))
@@ -88,22 +110,15 @@ def route(scene: Scene, stops: Sequence[Stop], *, hold: float = 0.6) -> CameraPa
     previous = position
     for index, stop in enumerate(stops[1:], start=1):
         here = np.asarray(stop.position, dtype=np.float64)
-        if stop.via is None:
-            step = frame @ perceived(boxes, previous, here)
-        else:
+        link = None
+        if stop.via is not None:
             link = links.get(scene.entity(stop.via))
             if link is None:
                 raise AberrantError(f"route stop {index}: {stop.via!r} is not a linked portal")
-            transfer = link.transfer
-            inverse = np.linalg.inv(transfer)
-            virtual = inverse[:3, :3] @ here + inverse[:3, 3]  # the stop as seen from this side of the portal
-            t = segment_crossing(link, previous, virtual)
-            if t is None:
-                raise AberrantError(f"route stop {index}: the straight walk to it does not pass through {stop.via!r}")
-            crossing = previous + t * (virtual - previous)
-            step = frame @ perceived(boxes, previous, crossing)
-            frame = frame @ link.rotation.T
-            step = step + frame @ perceived(boxes, link.map_point(crossing), here)
+        leg = walk_leg(boxes, frame, previous, here, link)
+        if leg is None:
+            raise AberrantError(f"route stop {index}: the straight walk to it does not pass through {stop.via!r}")
+        step, frame = leg
         new_look = frame @ (np.asarray(stop.look_at, dtype=np.float64) - here)
         distance = float(np.linalg.norm(step))
         duration = max(distance / stop.pace, _angle_deg(look, new_look) / TURN_RATE, 0.25)
