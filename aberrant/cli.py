@@ -351,13 +351,25 @@ def cmd_play(args: argparse.Namespace) -> int:
     if problem is not None:
         raise UsageError(problem)
     from aberrant.levels import open_level
+    from engine.scene_writer import scene_document
 
+    record = Path(args.record) if args.record else None
+    if record is not None:
+        if record.suffix.lower() != ".json":
+            raise UsageError(f"--record {shorten(record)}: the camera path is saved in a scene file (.json)")
+        _check_output("--record", record)
     with open_level(args.scene) as level:
         watcher = level_watcher(args.scene, level)
+        template = None  # the recording goes into the level's own scene file, as it is on disk then
+        if record is not None:
+            template = scene_document(level.scene, Path(os.path.abspath(record)).parent)  # before play moves it
+        elif level.kind == "scene" and level.file is not None and level.file.suffix.lower() == ".json":
+            record = level.file
         try:
             return run_player(
-                level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames, watcher=watcher
-            )
+                level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames, watcher=watcher,
+                record=record, record_template=template,
+            )  # fmt: skip
         except EditorUnavailable as e:
             raise UsageError(str(e)) from None
 
@@ -480,6 +492,10 @@ def build_parser() -> argparse.ArgumentParser:
     play.add_argument("--backend", default=None, help="reference, glsl or opencl (default: the first that starts)")
     play.add_argument("--size", default=None, help="window WIDTHxHEIGHT (default 1280x720)")
     play.add_argument("--fly", action="store_true", help="start flying instead of walking")
+    play.add_argument(
+        "--record", default=None, metavar="FILE.json",
+        help="R saves the recorded camera path in this scene file (the level with it); default: a .json level's own",
+    )  # fmt: skip
     play.add_argument("--frames", type=int, default=None, help=argparse.SUPPRESS)  # tests: quit after N frames
     play.set_defaults(func=cmd_play)
     return parser

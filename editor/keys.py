@@ -118,6 +118,7 @@ PLAYER = {
     "sprint": Binding("Shift", "run"),
     "mode": Binding("Tab", "walk or fly"),
     "fullscreen": Binding("F11", "fullscreen or window"),
+    "record": Binding("R", "record the camera path; again: stop and save it"),
     "quit": Binding("Esc", "quit"),
 }
 

@@ -1,7 +1,9 @@
 """``aberrant play``: a level in a window with no panels, walked (gravity, collision) or flown.
 
 The frame is the tracer's, drawn over the whole window; a line of text over
-it gives the frame rate, the backend and the mode. Walking is
+it gives the frame rate, the backend and the mode. The record key starts and
+stops recording the camera as the level's camera path
+(:class:`systems.camera_recording.RecordingSession`). Walking is
 :class:`systems.walking.Walker`; flying is the tick loop's own camera movement
 (:class:`systems.app.App`), which also teleports, uploads and renders. The
 keys are :data:`editor.keys.PLAYER`.
@@ -12,6 +14,9 @@ from __future__ import annotations
 import ctypes
 import time
 from collections import deque
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
 
 from imgui_bundle import imgui  # first: points the glfw module at imgui-bundle's libglfw
 
@@ -24,6 +29,7 @@ from engine.errors import AberrantError
 from engine.input import NO_INPUT, InputState
 from engine.scene import Scene
 from systems.app import App
+from systems.camera_recording import RecordingSession
 from systems.walking import Walker
 
 DEFAULT_SIZE = (1280, 720)
@@ -33,6 +39,7 @@ TURN_SPEED = 120.0
 SCALE = 0.5
 TEXT = (1.0, 0.9, 0.5, 1.0)
 ERROR_TEXT = (1.0, 0.45, 0.4, 1.0)
+RECORD_TEXT = (1.0, 0.3, 0.3, 1.0)
 
 
 def player_keys(dt: float, mouse: tuple[float, float]) -> InputState:
@@ -60,7 +67,11 @@ class PlayerWindow:
         backend: str | None = None,
         fly: bool = False,
         watcher: LevelWatcher | None = None,
+        record: Path | None = None,
+        record_template: Mapping[str, Any] | None = None,
     ) -> None:
+        """``record``: the scene file the record key saves the camera path into (``record_template``: the
+        document saved with it; ``None``: the file's own)."""
         import glfw
         import moderngl
 
@@ -101,6 +112,7 @@ class PlayerWindow:
         #: Starting over nothing, the player flies (walking would fall for ever) and says so.
         self.flying = fly or not self.walker.ground_below()
         self.notice = "" if self.flying == fly else "nothing below to stand on: flying"
+        self.recording = RecordingSession(scene, record, record_template)
         self.frame_times: deque[float] = deque(maxlen=30)
         self._windowed: tuple[int, int, int, int] | None = None
         self._cursor: tuple[float, float] | None = None
@@ -123,6 +135,7 @@ class PlayerWindow:
             self.scene.activate()
             return False
         old, self.scene = self.scene, scene
+        self.notice = self.recording.rebind(scene) or self.notice
         self.app.close()
         self.walker.close()
         self.app, self.walker = app, Walker.of(scene)
@@ -178,6 +191,8 @@ class PlayerWindow:
             self.walker.vertical_speed = 0.0
         if PLAYER["fullscreen"].pressed():
             self.toggle_fullscreen()
+        if PLAYER["record"].pressed():
+            self.notice = self.recording.toggle()
         state = player_keys(dt, self._mouse())
         if self.flying:
             self.input.state = state
@@ -186,6 +201,7 @@ class PlayerWindow:
             self.walker.step(dt, state)
         self.app.size = self._trace_size()
         frame = self.app.tick(dt)
+        self.recording.update(dt)
         if frame is not None:
             self.host.present(frame)
         width, height = glfw.get_framebuffer_size(self.window)
@@ -199,6 +215,8 @@ class PlayerWindow:
         draw.add_text((8, 6), imgui.get_color_u32(TEXT), text)
         if self.notice:
             draw.add_text((8, 28), imgui.get_color_u32(TEXT), self.notice)
+        if self.recording.recording:
+            draw.add_text((width - 170, 6), imgui.get_color_u32(RECORD_TEXT), f"REC {self.recording.status()}")
         if self.watcher is not None and self.watcher.error:
             draw.add_text((8, 50), imgui.get_color_u32(ERROR_TEXT), f"not reloaded: {self.watcher.error}")
         imgui.render()
@@ -217,6 +235,8 @@ class PlayerWindow:
         return count
 
     def close(self) -> None:
+        if getattr(self, "recording", None) is not None:
+            self.recording.finish()  # closing the window mid-recording keeps what was recorded
         if getattr(self, "app", None) is not None:
             self.app.close()
             self.walker.close()
@@ -239,9 +259,13 @@ def run_player(
     fly: bool = False,
     frames: int | None = None,
     watcher: LevelWatcher | None = None,
+    record: Path | None = None,
+    record_template: Mapping[str, Any] | None = None,
 ) -> int:
     """Play ``scene`` in a window until it is closed (reloading it on a change ``watcher`` sees); returns 0."""
-    window = PlayerWindow(scene, size=size, backend=backend, fly=fly, watcher=watcher)
+    window = PlayerWindow(
+        scene, size=size, backend=backend, fly=fly, watcher=watcher, record=record, record_template=record_template
+    )
     try:
         window.run(frames)
     finally:

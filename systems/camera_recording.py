@@ -136,3 +136,55 @@ def scene_file_document(path: str | os.PathLike[str]) -> dict[str, Any]:
     if not isinstance(doc, dict):
         raise SceneFileError(shorten(path), "not a scene file: cannot add the recording")
     return doc
+
+
+class RecordingSession:
+    """What the player's record key does: start recording, then stop and save, each with a line to show.
+
+    ``out`` is the scene file the path is saved into (``None``: recording is refused, saying how to enable
+    it); ``template`` is the document it is saved with, else ``out``'s own document as it is on disk then.
+    """
+
+    def __init__(self, scene: Scene, out: Path | None, template: Mapping[str, Any] | None = None) -> None:
+        self.recorder = CameraRecorder(scene)
+        self.out = out
+        self.template = template
+
+    @property
+    def recording(self) -> bool:
+        return self.recorder.recording
+
+    def status(self) -> str:
+        """The overlay's reminder while recording."""
+        return f"recording {self.recorder.time:4.1f} s" if self.recording else ""
+
+    def toggle(self) -> str:
+        """Start, or stop and save; the message says what happened (an error is a message too, not raised)."""
+        if self.out is None:
+            return "recording needs a scene file to save into: play a .json level or give --record FILE.json"
+        if not self.recording:
+            self.recorder.start()
+            return f"recording the camera path (into {shorten(self.out)})"
+        return self.finish()
+
+    def finish(self) -> str:
+        """Stop a recording in progress and save it ("" when none was)."""
+        if not self.recording:
+            return ""
+        keys = self.recorder.stop()
+        if not keys or self.out is None:
+            return "recording too short: nothing saved"
+        try:
+            save_recording(keys, self.out, self.template or scene_file_document(self.out))
+        except AberrantError as e:
+            return f"not saved: {e}"
+        return f"saved a camera path of {len(keys)} keyframes, {keys[-1].time:.1f} s, into {shorten(self.out)}"
+
+    def update(self, dt: float) -> None:
+        self.recorder.update(dt)
+
+    def rebind(self, scene: Scene) -> str:
+        """The level was reloaded as ``scene``: a recording in progress ends (and is saved) here."""
+        message = self.finish()
+        self.recorder = CameraRecorder(scene)
+        return message

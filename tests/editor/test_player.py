@@ -136,17 +136,78 @@ print("REPORT " + json.dumps(report))
 """
 
 
-def test_the_player_reloads_a_saved_level_and_keeps_the_last_good_one(display, tmp_path):  # noqa: F811
-    env = {"DISPLAY": display, **{k: v for k, v in __import__("os").environ.items() if k != "DISPLAY"}}
+def run_script(script: str, screen: str, *args: str) -> dict:
+    """Run a player script on the Xvfb display ``screen``; its REPORT line (skips where the window cannot open)."""
+    env = {"DISPLAY": screen, **{k: v for k, v in __import__("os").environ.items() if k != "DISPLAY"}}
     result = subprocess.run(
-        [sys.executable, "-c", RELOAD_SCRIPT, str(tmp_path / "level.json")],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=240,
-    )  # fmt: skip
+        [sys.executable, "-c", script, *args], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
+    )
     if "needs a display" in result.stderr or "GLX" in result.stderr:
         pytest.skip(f"the player window cannot open here: {result.stderr.strip().splitlines()[-1]}")
     lines = [line for line in result.stdout.splitlines() if line.startswith("REPORT ")]
     assert result.returncode == 0 and lines, result.stderr
-    report = json.loads(lines[-1][len("REPORT ") :])
+    return json.loads(lines[-1][len("REPORT ") :])
+
+
+def test_the_player_reloads_a_saved_level_and_keeps_the_last_good_one(display, tmp_path):  # noqa: F811
+    report = run_script(RELOAD_SCRIPT, display, str(tmp_path / "level.json"))
     assert report["errors"] == [] and report["kept"] and report["reloaded"] == [2.0, True]
     assert report["broken"][0] == 2.0 and "level.json" in report["broken"][1] and "JSON" in report["broken"][1]
     assert report["fixed"] == [3.0, None]
+
+
+#: Runs in the subprocess: play a scene file, press R, fly forward, press R again; report what was saved.
+RECORD_SCRIPT = r"""
+import json, sys
+from pathlib import Path
+from imgui_bundle import imgui
+from aberrant.levels import open_level
+from editor.player import PlayerWindow
+
+path = Path(sys.argv[1])
+level = open_level(path)
+window = PlayerWindow(level.scene, size=(160, 120), backend="reference", fly=True, record=path)
+window.run(frames=2)
+def press(key):
+    imgui.get_io().add_key_event(key, True)
+    window.frame()
+    imgui.get_io().add_key_event(key, False)
+    window.frame()
+press(imgui.Key.r)
+started = window.recording.recording
+imgui.get_io().add_key_event(imgui.Key.w, True)
+window.run(frames=12)
+imgui.get_io().add_key_event(imgui.Key.w, False)
+press(imgui.Key.r)
+report = dict(started=started, stopped=not window.recording.recording, notice=window.notice, errors=window.errors)
+window.close()
+level.close()
+print("REPORT " + json.dumps(report))
+"""
+
+
+def test_the_record_key_saves_the_played_camera_path_into_the_scene_file(display, tmp_path):  # noqa: F811
+    from engine.scene_file import load_scene, save_scene
+
+    path = tmp_path / "level.json"
+    scene = __import__("demos").build_demo("starter")
+    save_scene(scene, path)
+    scene.close()
+    report = run_script(RECORD_SCRIPT, display, str(path))
+    assert report["errors"] == [] and report["started"] and report["stopped"], report
+    assert report["notice"].startswith("saved a camera path of"), report
+    loaded = load_scene(path)
+    try:
+        path_keys = loaded.camera_path
+        assert len(path_keys) >= 2 and path_keys[-1].position[2] < path_keys[0].position[2]  # W flew forward (-z)
+    finally:
+        loaded.close()
+
+
+def test_cli_play_refuses_a_record_file_that_is_no_scene_file(monkeypatch, capsys, tmp_path):
+    monkeypatch.setenv("DISPLAY", ":424242")  # never contacted
+    assert main(["play", "starter", "--record", str(tmp_path / "walk.txt")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--record" in err and ".json" in err
+    assert main(["play", "starter", "--record", str(tmp_path / "missing" / "walk.json")]) == 2
+    assert "does not exist" in capsys.readouterr().err

@@ -128,3 +128,39 @@ def test_a_bad_target_is_one_error_naming_it_and_writes_nothing(tmp_path):
     with pytest.raises(SceneFileError, match=r"x.json: field .camera_path.: cannot save the recording"):
         save_recording(keys[:1], tmp_path / "x.json", {"format": "aberrant-scene", "version": 1})
     assert [p.name for p in tmp_path.iterdir()] == ["taken.json"]
+
+
+def test_the_record_key_starts_then_stops_and_saves_into_the_scene_file(tmp_path):
+    from systems.camera_recording import RecordingSession
+
+    path = tmp_path / "level.json"
+    scene = build_demo("starter")
+    try:
+        save_scene(scene, path)
+        session = RecordingSession(scene, path)
+        assert "recording" in session.toggle() and session.recording
+        with App(scene, input_source=ScriptedInput([InputState(move=(0.0, 0.0, -1.0))] * 30)) as app:
+            for _ in range(30):
+                app.tick(DT)
+                session.update(DT)
+        assert session.status().startswith("recording")
+        message = session.toggle()
+    finally:
+        scene.close()
+    assert not session.recording and "saved a camera path of 5 keyframes, 1.0 s" in message, message
+    loaded = load_scene(path)
+    try:
+        assert len(loaded.camera_path) == 5 and loaded.camera_path[-1].time == pytest.approx(1.0)
+    finally:
+        loaded.close()
+
+
+def test_without_a_file_the_record_key_says_how_and_records_nothing():
+    from systems.camera_recording import RecordingSession
+
+    scene = build_demo("starter")
+    try:
+        session = RecordingSession(scene, None)
+        assert "--record" in session.toggle() and not session.recording
+    finally:
+        scene.close()
