@@ -173,10 +173,12 @@ def gltf_document(scene: Scene) -> tuple[dict[str, Any], bytes]:
             camera = scene.get(entity, Camera)
             lens = {"yfov": math.radians(camera.fov_deg), "znear": ZNEAR}
             index = writer.add("cameras", {"type": "perspective", "perspective": lens})
-            extras = {"aberrant": {"camera": {"speed": float(camera.speed)}}}
-            writer.node({"name": name, "camera": index, **_trs(transform, scale=False), "extras": extras})
+            lens_extras = {"aberrant": {"camera": {"speed": float(camera.speed)}}}
+            writer.node({"name": name, "camera": index, **_trs(transform, scale=False), "extras": lens_extras})
             continue
-        mesh, aberration, portal = (scene.try_get(entity, kind) for kind in (Mesh, Aberration, Portal))
+        mesh = scene.try_get(entity, Mesh)
+        aberration = scene.try_get(entity, Aberration)
+        portal = scene.try_get(entity, Portal)
         if sum(c is not None for c in (mesh, aberration, portal)) > 1:
             raise SceneError(
                 "a glTF node is a mesh, an aberration or a portal, not several", entity=scene.name_of(entity)
