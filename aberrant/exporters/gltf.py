@@ -238,8 +238,9 @@ def gltf_bytes(scene: Scene, suffix: str = ".glb") -> bytes:
 def export_gltf(scene: Scene, path: str | os.PathLike[str]) -> None:
     """Write ``scene`` to ``path`` (``.glb`` or ``.gltf``) atomically: the old file stays unless the new one is whole.
 
-    Raises :class:`GltfExportError` naming the file (a wrong suffix, an entity glTF cannot hold) and ``OSError``
-    naming it when it cannot be written (a folder, a FIFO, a read-only file or a missing folder).
+    Raises :class:`engine.errors.AberrantError` (a ``GltfExportError``) naming the file (a wrong suffix, an
+    entity glTF cannot hold) and ``OSError`` naming it when it cannot be written (a folder, a FIFO, a read-only
+    file or a missing folder).
     """
     target = Path(path)
     file = shorten(target)
