@@ -8,10 +8,11 @@ an object's custom properties. What maps to what:
   composed, quaternions ``(x, y, z, w)`` as ours) is its entity's transform.
   glTF is right-handed, +Y up, cameras looking down -Z: our conventions, so no
   conversion.
-* **Components** are node extras ``{"aberrant": {"aberration": {...}}}`` or
-  ``{"aberrant": {"portal": {"target": "<node name>"}}}``: the same keys and
+* **Components** are node extras ``{"aberrant": {"aberration": {...}}}``,
+  ``{"aberrant": {"portal": {"target": "<node name>"}}}`` or ``{"aberrant": {"light": {"kind": "sun"}}}``
+  (a sun shines along the node's -Z, as glTF's own lights): the same keys and
   values as a scene file's entity components, validated by the scene-file
-  reader. A node carrying one is that box or quad; its mesh (the stand-in the
+  reader. A node carrying one is that box, quad or light; its mesh (the stand-in the
   designer saw in Blender) is not rendered.
 * **Meshes**: each triangle primitive becomes a mesh entity (``<node>`` or
   ``<node>.<i>`` when a mesh has several), its triangles written as an OBJ in
@@ -45,7 +46,7 @@ from engine.scene_file import SceneFileError, scene_from_document
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 #: The keys allowed in a node's ``extras.aberrant`` block.
-COMPONENT_KEYS = ("aberration", "portal")
+COMPONENT_KEYS = ("aberration", "portal", "light")
 _COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 _TRIANGLES = 4
@@ -296,7 +297,9 @@ class _Importer:
                     field=f"extras.aberrant.{key}",
                 )
         if len(block) > 1:
-            raise self.gltf.fail("a node is either an aberration or a portal, not both", node=name, field="extras")
+            raise self.gltf.fail(
+                f"a node carries one component, this one {len(block)}: {', '.join(block)}", node=name, field="extras"
+            )
         return dict(block)
 
     def primitive(self, mesh_index: int, i: int, primitive: dict[str, Any], name: str) -> dict[str, Any]:
