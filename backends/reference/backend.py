@@ -12,7 +12,7 @@ from backends.base import AOV_DTYPES, AOVS, Backend, Frame
 from backends.reference.aberrations import Boxes, SigmaBounds
 from backends.reference.portals import Portals
 from backends.reference.shading import Lights, ShadingSettings, to_uint8
-from backends.reference.trace import Space, TraceResult, trace
+from backends.reference.trace import Space, TraceResult, shadow_rays_lit, trace
 from backends.reference.traverse import Geometry
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
@@ -115,6 +115,21 @@ class ReferenceBackend(Backend):
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         bounds = SigmaBounds.default() if sigma is None else SigmaBounds(*(np.asarray(b, np.float64) for b in sigma))
         return trace(self._geometry, self._settings, o, d, self._origin, self.space(bounds), self._lights)
+
+    def lit(
+        self, points: np.ndarray, normals: np.ndarray, towards: np.ndarray, reach: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Whether shadow rays from world ``points`` (off the surface along unit ``normals``) towards unit
+        ``towards`` get there: to the sky, or ``reach`` along the journey (docs/semantics.md, "Lights and
+        shadows"). For tests of exact shadow edges."""
+        if self._geometry is None or self._settings is None:
+            raise AberrantError("reference backend: lit() before upload(); upload a packed scene first")
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3) - self._origin
+        n = np.broadcast_to(np.asarray(normals, dtype=np.float64), p.shape)
+        t = np.broadcast_to(np.asarray(towards, dtype=np.float64), p.shape)
+        far = np.full(len(p), np.inf) if reach is None else np.broadcast_to(np.asarray(reach, np.float64), len(p))
+        with np.errstate(all="ignore"):
+            return shadow_rays_lit(self._geometry, self._settings, self.space(), p, n, t, far)
 
     def space(self, sigma: SigmaBounds | None = None) -> Space:
         """The uploaded aberrations and portals as float64 arrays, with the radial bounds to trace by."""
