@@ -18,11 +18,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from space_scale import base_scene, paired  # noqa: E402  (beside this script)
+from space_scale import base_scene, paired
 
-from components import Light  # noqa: E402
-from demos import build_demo  # noqa: E402
-from engine.scene import Scene  # noqa: E402
+from components import Light
+from demos import build_demo
+from engine.scene import Scene
 
 
 def boxes(sun: bool) -> Scene:
