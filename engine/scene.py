@@ -64,6 +64,25 @@ def _kind(component: object) -> str:
     return type(component).__name__.lower()
 
 
+def _looking(
+    name: str,
+    key: str,
+    position: Sequence[float],
+    look_at: Sequence[float] | None,
+    rotation: Sequence[float] | None,
+    euler_deg: Sequence[float] | None,
+) -> Sequence[float] | None:
+    """``rotation``, or the one that turns local -Z from ``position`` towards ``look_at`` (then the only one given)."""
+    if look_at is None:
+        return rotation
+    if rotation is not None or euler_deg is not None:
+        raise SceneError("give one of rotation, euler_deg or look_at", entity=name, field=f"{key}.look_at")
+    try:
+        return tuple(float(c) for c in look_at_quat(position, look_at))
+    except ValueError:
+        raise SceneError(f"look_at equals the {key}'s position", entity=name, field=f"{key}.look_at") from None
+
+
 def make_transform(
     position: Sequence[float] = (0.0, 0.0, 0.0),
     rotation: Sequence[float] | None = None,
@@ -418,13 +437,7 @@ class Scene:
         range: float | None = None,
     ) -> int:
         """A sun (shining along its local -Z; ``look_at`` a world point it shines towards) or a point light."""
-        if look_at is not None:
-            if rotation is not None or euler_deg is not None:
-                raise SceneError("give one of rotation, euler_deg or look_at", entity=name, field="light.look_at")
-            try:
-                rotation = tuple(float(c) for c in look_at_quat(position, look_at))
-            except ValueError:
-                raise SceneError("look_at equals the light's position", entity=name, field="light.look_at") from None
+        rotation = _looking(name, "light", position, look_at, rotation, euler_deg)
         light = self._component(
             name, "light", Light, kind=kind, color=tuple(color), intensity=intensity, shadows=shadows, range=range
         )
@@ -442,13 +455,7 @@ class Scene:
         name: str = "camera",
     ) -> int:
         """Create or move the active camera (``look_at`` is a world point)."""
-        if look_at is not None:
-            if rotation is not None or euler_deg is not None:
-                raise SceneError("give one of rotation, euler_deg or look_at", entity=name, field="camera.look_at")
-            try:
-                rotation = tuple(float(c) for c in look_at_quat(position, look_at))
-            except ValueError:
-                raise SceneError("look_at equals the camera position", entity=name, field="camera.look_at") from None
+        rotation = _looking(name, "camera", position, look_at, rotation, euler_deg)
         camera = self._component(name, "camera", Camera, fov_deg=fov_deg, speed=speed)
         try:
             transform = make_transform(position, rotation, euler_deg)

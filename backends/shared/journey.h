@@ -3,18 +3,11 @@
 
 /* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
-/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
- * vector normalised, then rotated (never a difference of two world points). */
-FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
+/* A ray's state at its start (docs/semantics.md section 1): from o along unit d, no box yet, nothing left. */
+FORCE_INLINE Ray start_ray(real3 o, real3 d)
 {
-    real tan_half = cam.lens.x;
-    real aspect = cam.lens.y;
-    real x = (REAL(2.0f) * (TO_REAL(i) + REAL(0.5f)) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
-    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + REAL(0.5f)) / TO_REAL(cam.size.y)) * tan_half;
-    real3 cam_dir = normalize(R3(x, y, -1.0f));
-    real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
     Ray ray;
-    ray.o = cam.position.xyz;
+    ray.o = o;
     ray.r = d;
     ray.o_len = length(ray.o);
     ray.r_len = length(d);
@@ -30,6 +23,19 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
     ray.leaving_kind = -1;
     ray.leaving = -1;
     return ray;
+}
+
+/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
+ * vector normalised, then rotated (never a difference of two world points). */
+FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
+{
+    real tan_half = cam.lens.x;
+    real aspect = cam.lens.y;
+    real x = (REAL(2.0f) * (TO_REAL(i) + REAL(0.5f)) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
+    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + REAL(0.5f)) / TO_REAL(cam.size.y)) * tan_half;
+    real3 cam_dir = normalize(R3(x, y, -1.0f));
+    real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
+    return start_ray(cam.position.xyz, d);
 }
 
 #if HAS_ABERRATIONS
@@ -219,22 +225,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
  * in the transition from no box into the box there, ends in the sky or past its reach. */
 FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, real3 towards, real reach)
 {
-    Ray ray;
-    ray.o = position + (SHADOW_BIAS * max(REAL(1.0f), length(position))) * n;
-    ray.r = towards;
-    ray.o_len = length(ray.o);
-    ray.r_len = length(towards);
-    ray.w = towards;
-    ray.d0 = towards;
-    ray.L = REAL(0.0f);
-    ray.Lambda = REAL(0.0f);
-    ray.t_from = REAL(0.0f);
-    ray.t_piece = REAL(0.0f);
-    ray.f = REAL(1.0f);
-    ray.aberration = -1;
-    ray.n = 0;
-    ray.leaving_kind = -1;
-    ray.leaving = -1;
+    Ray ray = start_ray(position + (SHADOW_BIAS * max(REAL(1.0f), length(position))) * n, towards);
 #if HAS_ABERRATIONS
     ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)),
                     cam.sigma_min.xyz, cam.sigma_max.xyz);
