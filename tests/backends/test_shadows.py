@@ -131,7 +131,37 @@ def test_a_metric_box_stretches_the_shadow_along_its_axis(scenes):
     assert lit_at(stretched, edges, towards=sun) == [True, False, False, True, True]
 
 
+def point_lamp() -> Scene:
+    """A point light at (0, 4, 0) over the box, a ceiling plate above it: behind the light, it casts nothing."""
+    scene = Scene("point lamp")
+    floor_and_box(scene)
+    scene.add_mesh("ceiling", "box", position=(0.0, 6.0, 0.0), scale=(40.0, 0.2, 40.0))
+    scene.add_light("lamp", "point", position=(0.0, 4.0, 0.0), intensity=16.0)
+    scene.set_camera((0.0, 3.0, 6.0), look_at=(0.0, 0.0, 0.0))
+    return scene
+
+
+def test_a_point_light_is_blocked_only_before_its_distance(scenes):
+    # From the floor point (x, 0, 0) the ray to the light at height 4 is at x (1 - y/4) at height y: it meets
+    # the box (y in [1, 2], |x| <= 0.5) where its top edge, |x| / 2 <= 0.5, says: |x| <= 1. The ceiling at
+    # y = 5.9 lies past the light: it never shades.
+    scene = point_lamp()
+    scenes.append(scene)
+    ref = upload_to_reference(scene)
+    try:
+        xs = [0.0, 1.0 - EPS, 1.0 + EPS, 3.0]
+        points = np.array([[x, 0.0, 0.0] for x in xs])
+        d = np.array([0.0, 4.0, 0.0]) - points
+        distance = np.linalg.norm(d, axis=1)
+        lit = ref.lit(points, UP, d / distance[:, None], distance)
+        assert [bool(v) for v in lit] == [False, False, True, True]
+        assert not ref.lit(points[3:], UP, d[3:] / distance[3:, None]).any()  # with no reach the ceiling shades
+    finally:
+        ref.release()
+
+
 CASES = {
+    "lamp": point_lamp,
     "box": box_shadow,
     "portal": box_shadow_through_portal,
     "room": room_lit_through_portal,
