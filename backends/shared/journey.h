@@ -125,6 +125,12 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
 #else
         bool search = true;
 #endif
+#if HAS_SHADOWS
+        /* A shadow ray's mesh search ends at its reach: a mesh past it does not block it. */
+        if (reach < REAL_MAX) {
+            t_cut = min(t_cut, (reach - ray.L) / ray.r_len);
+        }
+#endif
 #if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH && HAS_SPACE
         /* The first leg starts at the camera: a search that ends (with the tie window for rounding) nearer
          * than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
