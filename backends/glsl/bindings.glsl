@@ -92,9 +92,17 @@ layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material ma
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
 layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
+/* A compute shader may have 16 storage blocks (llvmpipe, and most GPUs): the tables a variant never reads are
+ * left out, so the 12 tables, the camera and 4 AOV outputs fit where they are needed. */
+#if BVH_WIDTH >= 4
 layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
+#endif
+#if PORTAL_TREE || BOX_TREE
 layout(std430, binding = 10) readonly restrict buffer SpaceNodeTable { SpaceNode space_nodes_data[]; };
+#endif
+#if HAS_LIGHTS
 layout(std430, binding = 11) readonly restrict buffer LightTable { Light lights_data[]; };
+#endif
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */

@@ -182,6 +182,21 @@ def test_every_backend_draws_the_reference_shadows(case, backend, precision, bac
     assert shade[floor].min() < 0.6 * shade[floor].max()  # a shadow is in view
 
 
+def test_glsl_storage_buffers_draw_the_shadows_its_images_draw(scenes):
+    from conftest import require_backend
+
+    from backends.glsl.backend import GlslBackend
+
+    require_backend("glsl")
+    scene = box_shadow_through_portal()
+    scenes.append(scene)
+    frames = []
+    for tables in ("image", "ssbo"):
+        with GlslBackend(tables=tables) as backend:  # every AOV: the storage blocks still fit
+            frames.append(render_aovs(backend, scene, *SIZE, AOVS))
+    assert np.array_equal(frames[0].color, frames[1].color) and np.array_equal(frames[0].depth, frames[1].depth)
+
+
 @pytest.mark.parametrize(("backend", "precision"), EVERY)
 def test_a_scene_without_lights_renders_as_the_implicit_sun(backend, precision, backend_factory, scenes):
     plain = box_shadow()
