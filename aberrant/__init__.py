@@ -96,6 +96,13 @@ re-uploads only what changed.
 >>> corridor.get(corridor.entity("north_end"), aberrant.Portal).target
 'south_end'
 
+`Light`: a ``sun`` (shining along its -Z) or a ``point`` light; one that casts shadows sends shadow rays
+along the camera rays' journey, through portals and boxes (a scene without one keeps the settings' sun).
+
+>>> sun = scene.add_light("sun", "sun", look_at=(0, -1, -1))
+>>> scene.get(sun, aberrant.Light).shadows
+True
+
 `Camera`: the lens and the perceived walking speed (its pose is the entity's `Transform`).
 
 >>> camera = scene.set_camera((0, 1.6, 4), look_at=(0, 1, 0), fov_deg=50)
@@ -172,7 +179,7 @@ from aberrant.exporters.gltf import export_gltf
 from aberrant.levels import open_level
 from aberrant.rendering import render
 from backends.base import Frame, create_backend
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from demos import build_demo, demo_names
 from engine.errors import AberrantError
 from engine.input import InputState, ScriptedInput
@@ -192,6 +199,7 @@ __all__ = [
     "Frame",
     "InputState",
     "Keyframe",
+    "Light",
     "Mesh",
     "Portal",
     "Scene",

@@ -9,7 +9,10 @@ round the house: the thesis's "rooms that should not exist" and "traversal
 that changes locations and orientations". Four portal pairs join them, each
 filling a doorway in the middle of its wall; from the lawn one sees the hall
 through the front door, and the gallery through the hall's far door: a portal
-seen through a portal.
+seen through a portal. A low sun casts the cottage's and the trees' shadows
+on the lawn and, through the front door, a stripe of sunlight onto the hall's
+floor: shadow rays pass the portals as camera rays do, and the rooms' own sky
+is blocked by their ceilings.
 """
 
 from __future__ import annotations
@@ -56,6 +59,8 @@ BEDROOM = ((-106.0, -60.0, -10.5), (-99.0, -57.0, -3.5))
 EYE = 1.7
 START = (0.5, 1.8, 9.0)
 START_LOOK = (0.0, 1.75, 0.0)
+#: The way the sun shines (it stands towards the opposite direction: south, a little east, 33 degrees up).
+SUN_LOOK = (-0.1, -0.55, -0.83)
 
 
 def cottage(scene: Scene) -> None:
@@ -124,8 +129,11 @@ def bedroom(scene: Scene) -> None:
 
 def build() -> Scene:
     """The cottage, its three impossible rooms and the four portal pairs between their doorways."""
-    scene = Scene("house", settings=Settings(background=(0.58, 0.74, 0.92), light_dir=(0.5, 0.8, 0.35)))
+    scene = Scene("house", settings=Settings(background=(0.58, 0.74, 0.92), ambient=0.25))
     use_blocks(scene)
+    # A low sun from the south (behind the start, shining through the front door): the rooms have
+    # ceilings, so the hall is lit only by the stripe of sunlight its south door lets in from the lawn.
+    scene.add_light("sun", "sun", look_at=SUN_LOOK, color=(1.0, 0.96, 0.88), intensity=1.3)
     cottage(scene)
     hall(scene)
     gallery(scene)

@@ -1,4 +1,5 @@
-"""The Add menu's operations: primitives, imported meshes, aberrations, portal pairs, the camera, duplicates.
+"""The Add menu's operations: primitives, imported meshes, aberrations, portal pairs, lights, the camera,
+duplicates.
 
 Each one is a single undoable command that appends entities at the end of
 the creation order (so undo removes them and the file is as before) and
@@ -12,10 +13,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from editor.commands import AssetOp, Command, CreateOp, EntityRecord, Op, SetOp, capture
 from engine.assets import MESH_SUFFIXES
 from engine.errors import AberrantError
+from engine.maths import quat_from_euler_deg
 from engine.scene import AssetSpec
 
 if TYPE_CHECKING:
@@ -126,6 +128,18 @@ class AddingMixin:
             EntityRecord(b, (Transform((x + half, y, z)), Portal(a, color))),
         ]
         return self._append(f"add portals {a} and {b}", records)
+
+    def add_light(self, kind: str, position: Sequence[float] = (0.0, 0.0, 0.0)) -> int | None:
+        """A shadowing sun shining down at 60 degrees, or a point light bright enough for a room (3 units up:
+        intensity 9 lights the floor below it as a unit sun would)."""
+        name = self.unique_name(kind if kind == "sun" else "lamp")
+        x, y, z = (float(c) for c in position)
+        if kind == "sun":
+            transform = Transform((x, y, z), tuple(float(c) for c in quat_from_euler_deg((-60.0, 30.0, 0.0))))
+            light = Light("sun")
+        else:
+            transform, light = Transform((x, y + 3.0, z)), Light("point", intensity=9.0)
+        return self._append(f"add {name}", [EntityRecord(name, (transform, light))])
 
     def add_camera(self, transform: Transform) -> int | None:
         """Create the scene camera at ``transform``, or move the existing one there (a scene has one camera)."""

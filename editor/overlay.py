@@ -1,9 +1,10 @@
-"""The preview's debug lines: boxes, portal quads, the scene camera and the selection as world segments,
-and the screen-space quads that draw them a few pixels wide.
+"""The preview's debug lines: boxes, portal quads, light glyphs, the scene camera and the selection as world
+segments, and the screen-space quads that draw them a few pixels wide.
 
 Aberration boxes (12 edges) and portal quads (4 edges) are drawn in their
 own colour where ``debug_draw`` is on, the selection in white, the scene
-camera as a small frustum. Lines are straight in undeformed space: they
+camera as a small frustum, a point light as a six-pointed star and a sun as
+an arrow along the way it shines, in the light's colour. Lines are straight in undeformed space: they
 show where an entity *is*, whatever the tracer makes it look like. Plain
 NumPy, tested without a GL context (:mod:`editor.preview` draws them).
 """
@@ -15,7 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from engine.errors import AberrantError
 from engine.maths import trs_matrix
 from engine.scene import Scene
@@ -66,6 +67,28 @@ def camera_edges(transform: Transform, camera: Camera, aspect: float = 4 / 3, de
     pairs = [(0, 1), (0, 2), (0, 3), (0, 4), (1, 2), (2, 3), (3, 4), (4, 1)]
     rigid = Transform(transform.position, transform.rotation)
     return _placed(rigid, _edges(pts, pairs).reshape(-1, 3)).reshape(-1, 2, 3)
+
+
+#: A point light's star: three axis segments and four diagonals through its position (local units).
+_STAR = (
+    np.array(
+        [[[-1, 0, 0], [1, 0, 0]], [[0, -1, 0], [0, 1, 0]], [[0, 0, -1], [0, 0, 1]]]
+        + [[[-0.6, -0.6 * b, -0.6 * c], [0.6, 0.6 * b, 0.6 * c]] for b in (1, -1) for c in (1, -1)],
+        dtype=np.float64,
+    )
+    * 0.25
+)
+#: A sun's arrow: a shaft along -Z (the way it shines), a four-line head, and a square at its tail.
+_HEAD = [[[0, 0, -1.0], [0.12 * x, 0.12 * y, -0.8]] for x, y in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+_SQUARE = [[[0.2 * x, 0.2 * y, 0], [-0.2 * y, 0.2 * x, 0]] for x, y in ((1, 1), (-1, 1), (-1, -1), (1, -1))]
+_ARROW = np.array([[[0, 0, 0], [0, 0, -1.0]], *_HEAD, *_SQUARE], dtype=np.float64)
+
+
+def light_edges(transform: Transform, light: Light) -> np.ndarray:
+    """A light's glyph (N, 2, 3): a star at a point light, an arrow along a sun's -Z; unscaled."""
+    glyph = _STAR if light.kind == "point" else _ARROW
+    rigid = Transform(transform.position, transform.rotation)
+    return _placed(rigid, glyph.reshape(-1, 3)).reshape(-1, 2, 3)
 
 
 Lines = tuple[np.ndarray, np.ndarray]
@@ -147,6 +170,11 @@ class Outlines:
                 if outline is not None:
                     segments.append(outline[0])
                     colors.append(outline[1])
+        for entity, (transform, light) in scene.query(Transform, Light):  # a few: no index needed
+            if entity != selected:
+                glyph = light_edges(transform, light)
+                segments.append(glyph)
+                colors.append(np.tile(np.asarray(light.color, dtype=np.float64), (len(glyph), 1)))
         camera = scene.camera_entity
         if show_camera and camera is not None and camera != selected:
             frustum = camera_edges(scene.get(camera, Transform), scene.get(camera, Camera))
@@ -166,7 +194,7 @@ def preview_lines(scene: Scene, selected: int | None = None, *, show_camera: boo
 
 
 def selection_edges(scene: Scene, entity: int) -> list[np.ndarray]:
-    """The outline of the selected entity: its box, quad, frustum or mesh bounds."""
+    """The outline of the selected entity: its box, quad, frustum, light glyph or mesh bounds."""
     transform = scene.try_get(entity, Transform)
     if transform is None:
         return []
@@ -178,6 +206,9 @@ def selection_edges(scene: Scene, entity: int) -> list[np.ndarray]:
     camera = scene.try_get(entity, Camera)
     if camera is not None:
         out.append(camera_edges(transform, camera))
+    light = scene.try_get(entity, Light)
+    if light is not None:
+        out.append(light_edges(transform, light))
     mesh = scene.try_get(entity, Mesh)
     if mesh is not None:
         try:

@@ -21,7 +21,7 @@ Two families exist:
   :data:`BVH_NODE_DTYPE`, compact binary :data:`BVH_COMPACT_NODE_DTYPE` (GLSL),
   4-wide :data:`BVH4_NODE_DTYPE` or 8-wide :data:`BVH8_NODE_DTYPE` (OpenCL
   only), whose leaves name rows of ``triangle_blocks`` (empty with binary trees).
-* real tables (``instances``, ``aberrations``, ``portals``, ``camera``):
+* real tables (``instances``, ``aberrations``, ``portals``, ``lights``, ``camera``):
   their ``real`` fields are float32 (``f32``) or float64 (``f64``). A record
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
   for f64), as std430 and OpenCL C both do.
@@ -36,6 +36,8 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+
+from components.light import MAX_LIGHTS
 
 Precision = Literal["f32", "f64"]
 PRECISIONS: tuple[Precision, ...] = ("f32", "f64")
@@ -234,13 +236,14 @@ MATERIAL_DTYPE = MATERIAL.dtype()
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
 #: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
 #: aberrations, portals, max_events)``; ``space_roots = (portal tree root, box tree root, 0, 0)``,
-#: rows of ``space_nodes``.
+#: rows of ``space_nodes``; ``lights = (rows of the lights table, 0, 0, 0)``.
 SETTINGS = Record(
     "Settings",
     (
         *_vectors("float4", "background", "light_dir", "event_limit_color", "shading"),
         Field("counts", "int4"),
         Field("space_roots", "int4"),
+        Field("lights", "int4"),
     ),
 )
 SETTINGS_DTYPE = SETTINGS.dtype()
@@ -303,6 +306,12 @@ CAMERA = Record(
 )
 
 
+#: A light (``components.Light``): ``vector.xyz`` is a sun's unit direction towards it, or a point light's
+#: camera-relative position; ``color = (rgb x intensity, range)``, range 0 for none; ``meta = (kind, shadows,
+#: entity, 0)``, kind :data:`LIGHT_KINDS`. At most ``components.MAX_LIGHTS`` rows are live.
+LIGHT = Record("Light", (Field("vector", "real4"), Field("color", "float4"), Field("meta", "int4")))
+
+
 def instance_dtype(precision: Precision) -> np.dtype:
     """The ``instances`` row at a precision (:data:`INSTANCE`)."""
     return INSTANCE.dtype(precision)
@@ -316,6 +325,11 @@ def aberration_dtype(precision: Precision) -> np.dtype:
 def portal_dtype(precision: Precision) -> np.dtype:
     """The ``portals`` row at a precision (:data:`PORTAL`)."""
     return PORTAL.dtype(precision)
+
+
+def light_dtype(precision: Precision) -> np.dtype:
+    """The ``lights`` row at a precision (:data:`LIGHT`)."""
+    return LIGHT.dtype(precision)
 
 
 def camera_dtype(precision: Precision) -> np.dtype:
@@ -339,6 +353,7 @@ RECORDS: tuple[Record, ...] = (
     PORTAL,
     TLAS_NODE,
     SPACE_NODE,
+    LIGHT,
     CAMERA,
 )
 
@@ -347,6 +362,9 @@ ABERRATION_MODES: dict[str, int] = {"metric": 0, "radial": 1, "additive": 2}
 ABERRATION_EXITS: dict[str, int] = {"restore": 0, "repeat": 1, "invert": 2}
 
 INSTANCE_FLAG_HAS_UVS = 1
+
+#: Light kinds shared by the packer and every kernel.
+LIGHT_KINDS: dict[str, int] = {"sun": 0, "point": 1}
 
 #: Integer constants of the records that the kernels see as ``#define``\ s (``layout.h``): link and grid
 #: bits of compact BVH records, box modes and exit rules, instance flags.
@@ -357,6 +375,8 @@ KERNEL_CONSTANTS: dict[str, int] = {
     **{f"MODE_{name.upper()}": code for name, code in ABERRATION_MODES.items()},
     **{f"EXIT_{name.upper()}": code for name, code in ABERRATION_EXITS.items()},
     "INSTANCE_FLAG_HAS_UVS": INSTANCE_FLAG_HAS_UVS,
+    **{f"LIGHT_{name.upper()}": code for name, code in LIGHT_KINDS.items()},
+    "MAX_LIGHTS": MAX_LIGHTS,
 }
 
 #: Names of the packed tables, in the binding order every backend uses.
@@ -372,6 +392,7 @@ TABLES: tuple[str, ...] = (
     "tlas_nodes",
     "triangle_blocks",
     "space_nodes",
+    "lights",
 )
 
 
@@ -393,6 +414,7 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "instances": instance_dtype,
         "aberrations": aberration_dtype,
         "portals": portal_dtype,
+        "lights": light_dtype,
         "camera": camera_dtype,
     }
     try:

@@ -22,9 +22,15 @@ class Features:
     portals: bool = False
     aberration_modes: frozenset[str] = frozenset()
     max_events: int = 16
+    #: Light entities exist (else the implicit sun along the settings' light_dir).
+    lights: bool = False
+    #: A light casts shadows: shadow rays travel the journey.
+    shadows: bool = False
 
     def defines(self) -> dict[str, int]:
         return {
+            "HAS_LIGHTS": int(self.lights),
+            "HAS_SHADOWS": int(self.shadows),
             "HAS_PORTALS": int(self.portals),
             "HAS_ABERRATIONS": int(bool(self.aberration_modes)),
             "HAS_METRIC": int("metric" in self.aberration_modes),

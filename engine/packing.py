@@ -16,6 +16,8 @@ float32 is fine-grained (1e-6 at 16 units).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from components import Mesh, Transform
@@ -29,6 +31,7 @@ from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
 from engine.packed import Features, PackedScene, TableUpdate
+from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
 from engine.scene import SETTINGS, Scene
 from engine.tlas import FAT_MARGIN, AabbTree
@@ -134,13 +137,20 @@ class ScenePacker:
             self._store_tlas()
             updates += [TableUpdate("instances"), TableUpdate("tlas_nodes")]
             updates += self.space.translate(scene, packed, delta, self._instance_bounds())
+            self._pack_lights(scene)
+            updates += [TableUpdate("lights")]
             changes = [c for c in changes if c.kind not in ("transform",)]
         instance_rows: set[int] = set()
         material_rows: set[int] = set()
         portals: set[int] = set()
         boxes: set[int] = set()
         components = False
+        lights = set(light_entities(scene))
         for change in changes:
+            if change.kind == "light" or (change.kind == "transform" and change.entity in lights):
+                self._pack_lights(scene)
+                updates.append(TableUpdate("lights"))
+                components |= change.kind == "light"
             if change.kind == SETTINGS:
                 self._pack_settings(scene)
                 updates.append(TableUpdate("settings"))
@@ -255,7 +265,15 @@ class ScenePacker:
         self._store_tlas()
         self._pack_materials(scene)
         self.space.full(scene, self.packed, self._instance_bounds())
+        self._pack_lights(scene)
         self._update_features_and_counts(scene)
+
+    def _pack_lights(self, scene: Scene) -> None:
+        """The ``lights`` table anew: a few rows, re-packed whole when one changes."""
+        assert self.packed is not None
+        self.packed.tables["lights"], self.packed.counts["lights"] = pack_lights(
+            scene, self.packed.origin, self.precision
+        )
 
     def _pack_settings(self, scene: Scene) -> None:
         assert self.packed is not None
@@ -270,15 +288,17 @@ class ScenePacker:
         c = self.packed.counts
         row["counts"][0] = (c["instances"], c["aberrations"], c["portals"], s.max_events)
         row["space_roots"][0] = (0, self.space.box_root, 0, 0)
+        row["lights"][0] = (c.get("lights", 0), 0, 0, 0)
         self.packed.tables["settings"] = row
         self.packed.counts["settings"] = 1
-        self.packed.features = Features(
-            self.packed.features.portals, self.packed.features.aberration_modes, s.max_events
-        )
+        self.packed.features = replace(self.packed.features, max_events=s.max_events)
 
     def _update_features_and_counts(self, scene: Scene) -> None:
         assert self.packed is not None
-        self.packed.features = Features(self.space.linked, self.space.modes, scene.settings.max_events)
+        lights = self.packed.counts.get("lights", 0) > 0
+        self.packed.features = Features(
+            self.space.linked, self.space.modes, scene.settings.max_events, lights, lights and shadowing(scene)
+        )
         self._pack_settings(scene)
 
     def _pack_instances(self, scene: Scene) -> None:

@@ -20,7 +20,7 @@ from typing import Any, TypeVar
 import esper
 import numpy as np
 
-from components import Aberration, Camera, Mesh, Name, Portal, Transform, ValidationError
+from components import MAX_LIGHTS, Aberration, Camera, Light, Mesh, Name, Portal, Transform, ValidationError
 from components.validation import MAX_MAGNITUDE
 from engine.assets import PRIMITIVES, AssetLibrary, MeshAsset
 from engine.errors import AberrantError, SceneError
@@ -62,6 +62,25 @@ class Change:
 
 def _kind(component: object) -> str:
     return type(component).__name__.lower()
+
+
+def _looking(
+    name: str,
+    key: str,
+    position: Sequence[float],
+    look_at: Sequence[float] | None,
+    rotation: Sequence[float] | None,
+    euler_deg: Sequence[float] | None,
+) -> Sequence[float] | None:
+    """``rotation``, or the one that turns local -Z from ``position`` towards ``look_at`` (then the only one given)."""
+    if look_at is None:
+        return rotation
+    if rotation is not None or euler_deg is not None:
+        raise SceneError("give one of rotation, euler_deg or look_at", entity=name, field=f"{key}.look_at")
+    try:
+        return tuple(float(c) for c in look_at_quat(position, look_at))
+    except ValueError:
+        raise SceneError(f"look_at equals the {key}'s position", entity=name, field=f"{key}.look_at") from None
 
 
 def make_transform(
@@ -315,11 +334,11 @@ class Scene:
             self.euler_deg[entity] = (x, y, z)
 
     @staticmethod
-    def _component(name: str, kind: str, factory: type[C], **fields: Any) -> C:
+    def _component(name: str, key: str, factory: type[C], **fields: Any) -> C:
         try:
             return factory(**fields)
         except ValidationError as e:
-            raise SceneError(e.message, entity=name, field=f"{kind}.{e.field}") from None
+            raise SceneError(e.message, entity=name, field=f"{key}.{e.field}") from None
 
     def add_mesh(
         self,
@@ -403,6 +422,27 @@ class Scene:
         eb = self.add_portal(name_b, target=name_a, color=color, debug_draw=debug_draw, **b)
         return ea, eb
 
+    def add_light(
+        self,
+        name: str,
+        kind: str = "sun",
+        *,
+        position: Sequence[float] = (0.0, 0.0, 0.0),
+        rotation: Sequence[float] | None = None,
+        euler_deg: Sequence[float] | None = None,
+        look_at: Sequence[float] | None = None,
+        color: Sequence[float] = (1.0, 1.0, 1.0),
+        intensity: float = 1.0,
+        shadows: bool = True,
+        range: float | None = None,
+    ) -> int:
+        """A sun (shining along its local -Z; ``look_at`` a world point it shines towards) or a point light."""
+        rotation = _looking(name, "light", position, look_at, rotation, euler_deg)
+        light = self._component(
+            name, "light", Light, kind=kind, color=tuple(color), intensity=intensity, shadows=shadows, range=range
+        )
+        return self._entity_with(name, dict(position=position, rotation=rotation, euler_deg=euler_deg), light)
+
     def set_camera(
         self,
         position: Sequence[float],
@@ -415,13 +455,7 @@ class Scene:
         name: str = "camera",
     ) -> int:
         """Create or move the active camera (``look_at`` is a world point)."""
-        if look_at is not None:
-            if rotation is not None or euler_deg is not None:
-                raise SceneError("give one of rotation, euler_deg or look_at", entity=name, field="camera.look_at")
-            try:
-                rotation = tuple(float(c) for c in look_at_quat(position, look_at))
-            except ValueError:
-                raise SceneError("look_at equals the camera position", entity=name, field="camera.look_at") from None
+        rotation = _looking(name, "camera", position, look_at, rotation, euler_deg)
         camera = self._component(name, "camera", Camera, fov_deg=fov_deg, speed=speed)
         try:
             transform = make_transform(position, rotation, euler_deg)
@@ -461,6 +495,16 @@ class Scene:
                 field="transform.scale",
             )
 
+    def check_lights(self) -> None:
+        """At most MAX_LIGHTS lights (the kernels' fixed loop); the error names the first one past it."""
+        lights = self.query(Light)
+        if len(lights) > MAX_LIGHTS:
+            raise SceneError(
+                f"a scene holds at most {MAX_LIGHTS} lights, this one {len(lights)}; remove one",
+                entity=self.name_of(lights[MAX_LIGHTS][0]),
+                field="light",
+            )
+
     def validate(self) -> None:
         """Cross-entity checks the components cannot make alone."""
         if self.camera_entity is None:
@@ -479,6 +523,7 @@ class Scene:
                     entity=self.name_of(entity),
                     field="portal.target",
                 )
+        self.check_lights()
         for entity, mesh in self.query(Mesh):
             if mesh.asset not in self.assets and mesh.asset not in PRIMITIVES:
                 raise SceneError(f"unknown asset {mesh.asset!r}", entity=self.name_of(entity), field="mesh.asset")

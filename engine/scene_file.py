@@ -20,7 +20,7 @@ Format, version 1::
       "camera": {"name", "position", "rotation" | "look_at" | "euler_deg", "fov_deg", "speed"},
       "assets": {NAME: {"path": "relative/to/scene.obj"} | {"primitive": "box"}},
       "entities": [{"name", "transform": {"position", "rotation" | "euler_deg", "scale"},
-                    "mesh": {...}, "aberration": {...}, "portal": {...}}],
+                    "mesh": {...}, "aberration": {...}, "portal": {...}, "light": {...}}],
       "camera_path": [{"time", "position", "rotation" | "look_at"}, ...]   (optional: the level's flythrough)
     }
 """
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from components import Aberration, Camera, Mesh, Portal, Transform, ValidationError
+from components import Aberration, Camera, Light, Mesh, Portal, Transform, ValidationError
 from components.validation import vec3
 from engine.assets import PRIMITIVES
 from engine.atomic_files import read_regular, write_atomically
@@ -64,11 +64,12 @@ KEYFRAME_KEYS = ("time", "position", "rotation", "look_at")
 SETTINGS_KEYS = ("background", "light_dir", "max_events", "event_limit_color", "ambient")
 CAMERA_KEYS = ("name", "position", "rotation", "look_at", "euler_deg", "fov_deg", "speed")
 ASSET_KEYS = ("path", "primitive")
-ENTITY_KEYS = ("name", "transform", "mesh", "aberration", "portal")
+ENTITY_KEYS = ("name", "transform", "mesh", "aberration", "portal", "light")
 TRANSFORM_KEYS = ("position", "rotation", "euler_deg", "scale")
 MESH_KEYS = ("asset", "color", "checker", "cull_backfaces")
 ABERRATION_KEYS = ("deformation", "mode", "exit", "priority", "debug_draw", "color")
 PORTAL_KEYS = ("target", "color", "debug_draw")
+LIGHT_KEYS = ("kind", "color", "intensity", "shadows", "range")
 
 #: The camera entity's name when the file does not give one.
 DEFAULT_CAMERA_NAME = "camera"
@@ -363,8 +364,14 @@ class _Reader:
             parts.append(
                 self.component(Portal, dict(self.obj(block["portal"], PORTAL_KEYS, "portal", label)), "portal", label)
             )
+        if "light" in block:
+            parts.append(self.light(block["light"], label))
         entity = self.create(scene, label, "name", *parts)
         self.remember_angles(scene, entity, block.get("transform"))
+
+    def light(self, value: object, label: str) -> Light:
+        """An entity's ``"light"`` block (also a glTF node's ``aberrant.light`` extras)."""
+        return self.component(Light, dict(self.obj(value, LIGHT_KEYS, "light", label)), "light", label)
 
     @staticmethod
     def remember_angles(scene: Scene, entity: int, block: object) -> None:
@@ -400,6 +407,7 @@ class _Reader:
             if name not in loaded:
                 self.load_asset(scene, name, entity=self.asset_label(name), field=f"assets.{name}")
         try:
+            scene.check_lights()
             scene.check_mesh_sizes()
         except SceneError as e:
             raise self.fail(e.detail, entity=e.entity, field=e.field) from None

@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from engine.errors import SceneError
 from engine.keyframes import Keyframe
 from engine.maths import quat_from_euler_deg, quat_to_euler_deg
@@ -125,6 +125,15 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
         portal = scene.try_get(entity, Portal)
         if portal is not None:
             item["portal"] = {"target": portal.target, "color": _floats(portal.color), "debug_draw": portal.debug_draw}
+        light = scene.try_get(entity, Light)
+        if light is not None:
+            item["light"] = {
+                "kind": light.kind,
+                "color": _floats(light.color),
+                "intensity": float(light.intensity),
+                "shadows": light.shadows,
+                "range": None if light.range is None else float(light.range),
+            }
         entities.append(item)
     doc["entities"] = entities
     if scene.camera_path:

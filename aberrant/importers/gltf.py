@@ -8,10 +8,11 @@ an object's custom properties. What maps to what:
   composed, quaternions ``(x, y, z, w)`` as ours) is its entity's transform.
   glTF is right-handed, +Y up, cameras looking down -Z: our conventions, so no
   conversion.
-* **Components** are node extras ``{"aberrant": {"aberration": {...}}}`` or
-  ``{"aberrant": {"portal": {"target": "<node name>"}}}``: the same keys and
+* **Components** are node extras ``{"aberrant": {"aberration": {...}}}``,
+  ``{"aberrant": {"portal": {"target": "<node name>"}}}`` or ``{"aberrant": {"light": {"kind": "sun"}}}``
+  (a sun shines along the node's -Z, as glTF's own lights): the same keys and
   values as a scene file's entity components, validated by the scene-file
-  reader. A node carrying one is that box or quad; its mesh (the stand-in the
+  reader. A node carrying one is that box, quad or light; its mesh (the stand-in the
   designer saw in Blender) is not rendered.
 * **Root nodes** given as translation, rotation and scale keep those values
   exactly (a written scene comes back bit for bit); others are decomposed.
@@ -54,7 +55,7 @@ from engine.scene_file import SceneFileError, scene_from_document
 
 GLTF_SUFFIXES = (".gltf", ".glb")
 #: The keys allowed in a node's ``extras.aberrant`` block (``camera`` on a camera node only).
-COMPONENT_KEYS = ("aberration", "portal", "camera")
+COMPONENT_KEYS = ("aberration", "portal", "light", "camera")
 #: The keys allowed in the scene's ``extras.aberrant`` block: scene-file sections.
 SCENE_KEYS = ("settings", "camera_path")
 _TRIANGLES = 4
@@ -231,7 +232,7 @@ class _Importer:
                 )
         if len(block) > 1:
             raise self.gltf.fail(
-                "a node is one of aberration, portal or camera, not several", node=name, field="extras"
+                "a node is one of aberration, portal, light or camera, not several", node=name, field="extras"
             )
         return dict(block)
 

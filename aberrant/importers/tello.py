@@ -25,9 +25,10 @@ mesh resources are binary files named by uid. What this importer maps, and why:
 * **Portals** are the quad [-1, 1]² in local XY facing +Z, exactly ours: no
   conversion; ``connectedGO`` becomes the target's (de-duplicated) name.
 * **Camera** component: the camera's world pose (scale dropped). Without one, a
-  camera inside the scene's bounds looking at their centre. PointLight is
-  ignored (we have one directional light); ProceduralMesh is skipped with a
-  warning that lists the objects.
+  camera inside the scene's bounds looking at their centre. A **PointLight**
+  (no fields) becomes a white shadowing point light at its object's world
+  position, as bright at half the scene's extent as the default sun;
+  ProceduralMesh is skipped with a warning that lists the objects.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ from aberrant.importers.tello_format import (
     read_mesh_resource,
     read_tello_document,
 )
-from components import Aberration, Mesh, Portal, Transform, ValidationError
+from components import MAX_LIGHTS, Aberration, Light, Mesh, Portal, Transform, ValidationError
 from components.validation import real, vector
 from engine.errors import AberrantError
 from engine.maths import look_at_quat, quat_from_matrix, quat_multiply, quat_normalize, quat_to_matrix, trs_matrix
@@ -68,6 +69,8 @@ from engine.scene_file import save_scene
 BOX_CENTRE = np.array([0.0, 0.0, 0.5])
 #: Default checker cells per UV unit (the thesis textured every box face with one checker image).
 DEFAULT_CHECKER = 0.125
+#: A PointLight is as bright as the default sun at this fraction of the scene's extent (inverse square).
+POINT_LIGHT_REACH = 0.5
 
 
 @dataclass
@@ -304,10 +307,9 @@ class _Importer:
         procedural = [o.label for o in objects if o.first(PROCEDURAL_MESH) is not None]
         if procedural:
             self.warnings.append(f"skipped ProceduralMesh components (not supported) on: {', '.join(procedural)}")
-        if any(o.first(POINT_LIGHT) is not None for o in objects):
-            self.warnings.append("ignored PointLight components (the thesis shaded without lighting; we use one light)")
         for obj in kept:
             self.add_object(scene, obj, mesh_dir_out, files)
+        self.add_point_lights(scene, [o for o in objects if o.first(POINT_LIGHT) is not None])
         self.add_camera(scene, camera_obj)
         return scene, files
 
@@ -345,6 +347,26 @@ class _Importer:
             label = name if not parts else self.unique(scene, f"{name}_aberration")
             # bottom pivot -> our cube's centre
             scene.create_entity(label, self.pose_transform(obj, BOX_CENTRE), aberration)
+
+    def add_point_lights(self, scene: Scene, lights: list[_Object]) -> None:
+        """A PointLight (no fields in the format) becomes a white shadowing point light at the object's world
+        position, bright enough to light the scene's extent (POINT_LIGHT_REACH of it at unit strength); past
+        MAX_LIGHTS, the rest are dropped with a warning."""
+        if len(lights) > MAX_LIGHTS:
+            dropped = ", ".join(o.label for o in lights[MAX_LIGHTS:])
+            self.warnings.append(f"kept the first {MAX_LIGHTS} PointLights (a scene holds no more), dropped: {dropped}")
+        extent = self.extent(scene)
+        for obj in lights[:MAX_LIGHTS]:
+            pose = self.pose_transform(obj)
+            name = self.unique(scene, f"{obj.name}_light")
+            light = Light("point", intensity=(POINT_LIGHT_REACH * extent) ** 2, shadows=True)
+            scene.create_entity(name, Transform(pose.position), light)
+
+    @staticmethod
+    def extent(scene: Scene) -> float:
+        """The largest scale of any mesh entity (walls and floors span the room), at least 1."""
+        scales = [max(abs(c) for c in t.scale) for _, (t, _) in scene.query(Transform, Mesh)]
+        return max([1.0, *scales])
 
     def pose_transform(self, obj: _Object, offset: np.ndarray | None = None) -> Transform:
         """The object's world pose as our Transform; one that overflows is an error naming the object."""

@@ -27,6 +27,7 @@ layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
 layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D tlas_nodes_img;
 layout(rgba32ui, binding = 10) readonly restrict uniform uimage2D triangle_blocks_img;
 layout(rgba32ui, binding = 11) readonly restrict uniform uimage2D space_nodes_img;
+layout(rgba32ui, binding = 12) readonly restrict uniform uimage2D lights_img;
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -62,6 +63,7 @@ Aberration fetch_aberration_(int i) { return Aberration_from_texels(aberrations_
 Portal fetch_portal_(int i) { return Portal_from_texels(portals_img, i * PORTALS_STRIDE); }
 TlasNode fetch_tlas_node_(int i) { return TlasNode_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
 SpaceNode fetch_space_node_(int i) { return SpaceNode_from_texels(space_nodes_img, i * SPACE_NODES_STRIDE); }
+Light fetch_light_(int i) { return Light_from_texels(lights_img, i * LIGHTS_STRIDE); }
 Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
 
 /* Table access: a record (fetched whole; the compiler drops the loads of unused fields). */
@@ -76,6 +78,7 @@ Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
 #define TLAS_NODE(i) (fetch_tlas_node_(i))
 #define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
 #define SPACE_NODE(i) (fetch_space_node_(i))
+#define LIGHT(i) (fetch_light_(i))
 #define CAMERA_ROW (fetch_camera_())
 
 #else /* storage buffers */
@@ -89,8 +92,17 @@ layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material ma
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
 layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
+/* A compute shader may have 16 storage blocks (llvmpipe, and most GPUs): the tables a variant never reads are
+ * left out, so the 12 tables, the camera and 4 AOV outputs fit where they are needed. */
+#if BVH_WIDTH >= 4
 layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
+#endif
+#if PORTAL_TREE || BOX_TREE
 layout(std430, binding = 10) readonly restrict buffer SpaceNodeTable { SpaceNode space_nodes_data[]; };
+#endif
+#if HAS_LIGHTS
+layout(std430, binding = 11) readonly restrict buffer LightTable { Light lights_data[]; };
+#endif
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -105,6 +117,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define TLAS_NODE(i) (tlas_nodes_data[(i)])
 #define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
 #define SPACE_NODE(i) (space_nodes_data[(i)])
+#define LIGHT(i) (lights_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 
 #endif

@@ -11,8 +11,8 @@ import numpy as np
 from backends.base import AOV_DTYPES, AOVS, Backend, Frame
 from backends.reference.aberrations import Boxes, SigmaBounds
 from backends.reference.portals import Portals
-from backends.reference.shading import ShadingSettings, to_uint8
-from backends.reference.trace import Space, TraceResult, trace
+from backends.reference.shading import Lights, ShadingSettings, to_uint8
+from backends.reference.trace import Space, TraceResult, shadow_rays_lit, trace
 from backends.reference.traverse import Geometry
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
@@ -47,6 +47,7 @@ class ReferenceBackend(Backend):
         self._settings: ShadingSettings | None = None
         self._boxes = Boxes.empty()
         self._portals = Portals.empty()
+        self._lights: Lights | None = None
 
     @classmethod
     def probe(cls) -> str | None:
@@ -94,6 +95,9 @@ class ReferenceBackend(Backend):
             self._boxes = Boxes.from_table(self._tables["aberrations"], self._counts.get("aberrations", 0))
         if first or "portals" in changed:
             self._portals = Portals.from_table(self._tables["portals"], self._counts.get("portals", 0))
+        if first or "lights" in changed:
+            count = self._counts.get("lights", 0)
+            self._lights = Lights.from_table(self._tables["lights"], count) if count else None
         return packed.update_bytes(updates)
 
     def trace_rays(
@@ -110,7 +114,22 @@ class ReferenceBackend(Backend):
         o = np.asarray(origin, dtype=np.float64) - self._origin
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         bounds = SigmaBounds.default() if sigma is None else SigmaBounds(*(np.asarray(b, np.float64) for b in sigma))
-        return trace(self._geometry, self._settings, o, d, self._origin, self.space(bounds))
+        return trace(self._geometry, self._settings, o, d, self._origin, self.space(bounds), self._lights)
+
+    def lit(
+        self, points: np.ndarray, normals: np.ndarray, towards: np.ndarray, reach: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Whether shadow rays from world ``points`` (off the surface along unit ``normals``) towards unit
+        ``towards`` get there: to the sky, or ``reach`` along the journey (docs/semantics.md, "Lights and
+        shadows"). For tests of exact shadow edges."""
+        if self._geometry is None or self._settings is None:
+            raise AberrantError("reference backend: lit() before upload(); upload a packed scene first")
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3) - self._origin
+        n = np.broadcast_to(np.asarray(normals, dtype=np.float64), p.shape)
+        t = np.broadcast_to(np.asarray(towards, dtype=np.float64), p.shape)
+        far = np.full(len(p), np.inf) if reach is None else np.broadcast_to(np.asarray(reach, np.float64), len(p))
+        with np.errstate(all="ignore"):
+            return shadow_rays_lit(self._geometry, self._settings, self.space(), p, n, t, far)
 
     def space(self, sigma: SigmaBounds | None = None) -> Space:
         """The uploaded aberrations and portals as float64 arrays, with the radial bounds to trace by."""
@@ -137,7 +156,7 @@ class ReferenceBackend(Backend):
         for first in range(0, height, band):
             rows = (first, min(height, first + band))
             directions = camera.primary_directions(width, height, rows).reshape(-1, 3)
-            result = trace(self._geometry, self._settings, origin, directions, self._origin, space)
+            result = trace(self._geometry, self._settings, origin, directions, self._origin, space, self._lights)
             _fill(frame, rows, result)
         frame.timings_ms["render"] = (time.perf_counter() - start) * 1e3
         return frame

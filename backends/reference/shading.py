@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from backends.reference.traverse import Geometry, MeshHits
+from engine.layout import LIGHT_KINDS
 
 
 @dataclass(frozen=True)
@@ -43,18 +45,84 @@ def world_normals(geo: Geometry, instance: np.ndarray, triangle: np.ndarray) -> 
 
 
 def shade(
-    geo: Geometry, settings: ShadingSettings, hits: MeshHits, direction: np.ndarray, world_position: np.ndarray
+    geo: Geometry,
+    settings: ShadingSettings,
+    hits: MeshHits,
+    direction: np.ndarray,
+    world_position: np.ndarray,
+    lighting: Callable[[np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
-    """``base · checker · (ambient + (1 − ambient)·max(0, n·l))`` with n turned to face the ray."""
+    """``base · checker · (ambient + (1 − ambient)·Σ)`` with n turned to face the ray; ``Σ`` is ``lighting(n)``
+    (the lights' sum, :func:`light_sum`) or, without it, the implicit sun's ``max(0, n·l)``."""
     n = world_normals(geo, hits.instance, hits.triangle)
     n = np.where(np.sum(n * direction, axis=1, keepdims=True) > 0.0, -n, n)
-    lambert = np.maximum(0.0, n @ settings.light_dir)
     material = geo.material[hits.instance]
     base = geo.color[material, :3]
     cell = geo.color[material, 3]
     factor = checker_factor(geo, hits, n, world_position, cell)
-    color = base * (factor * (settings.ambient + (1.0 - settings.ambient) * lambert))[:, None]
+    if lighting is None:
+        lambert = np.maximum(0.0, n @ settings.light_dir)
+        color = base * (factor * (settings.ambient + (1.0 - settings.ambient) * lambert))[:, None]
+    else:
+        color = base * (factor[:, None] * (settings.ambient + (1.0 - settings.ambient) * lighting(n)))
     return np.where(np.isfinite(color), color, 0.0)
+
+
+@dataclass(frozen=True)
+class Lights:
+    """The live rows of the ``lights`` table in float64 (docs/semantics.md, "Lights and shadows")."""
+
+    vector: np.ndarray  # (L, 3) a sun's unit direction towards it, a point light's packed position
+    color: np.ndarray  # (L, 3) colour x intensity
+    range: np.ndarray  # (L,) 0 for none
+    point: np.ndarray  # (L,) bool: a point light (else a sun)
+    shadows: np.ndarray  # (L,) bool
+
+    def __len__(self) -> int:
+        return len(self.range)
+
+    @staticmethod
+    def from_table(table: np.ndarray, count: int) -> Lights:
+        rows = table[:count]
+        meta = rows["meta"].astype(np.int64).reshape(-1, 4)
+        return Lights(
+            vector=rows["vector"][:, :3].astype(np.float64),
+            color=rows["color"][:, :3].astype(np.float64),
+            range=rows["color"][:, 3].astype(np.float64),
+            point=meta[:, 0] == LIGHT_KINDS["point"],
+            shadows=meta[:, 1] != 0,
+        )
+
+
+#: ``lit(rows, normals, towards, reach)``: whether shadow rays from the hits ``rows`` (off the surface along
+#: their normals, towards the light, reaching that far) get there.
+ShadowTest = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def light_sum(lights: Lights, n: np.ndarray, position: np.ndarray, lit: ShadowTest) -> np.ndarray:
+    """``Σ colour·max(0, n·l)·falloff·lit`` over the lights (N, 3): a sun's falloff is 1; a point light's is
+    ``1/d²``, times ``clamp(1 − (d/range)⁴, 0, 1)²`` with a range. A light behind the surface sends no shadow
+    ray; a shadowing light's rays decide ``lit``, the others' are lit."""
+    total = np.zeros((len(n), 3))
+    for k in range(len(lights)):
+        if lights.point[k]:
+            d = lights.vector[k] - position
+            distance = np.linalg.norm(d, axis=1)
+            towards = d / np.where(distance > 0.0, distance, 1.0)[:, None]
+            falloff = np.where(distance > 0.0, 1.0 / np.where(distance > 0.0, distance, 1.0) ** 2, 0.0)
+            if lights.range[k] > 0.0:
+                falloff *= np.clip(1.0 - (distance / lights.range[k]) ** 4, 0.0, 1.0) ** 2
+            reach = distance
+        else:
+            towards = np.broadcast_to(lights.vector[k], n.shape)
+            falloff = np.ones(len(n))
+            reach = np.full(len(n), np.inf)
+        weight = np.maximum(0.0, np.sum(n * towards, axis=1)) * falloff
+        rows = np.flatnonzero(weight > 0.0)
+        if lights.shadows[k] and rows.size:
+            weight[rows] *= lit(rows, n[rows], np.ascontiguousarray(towards[rows]), reach[rows])
+        total += lights.color[k] * weight[:, None]
+    return total
 
 
 def checker_factor(

@@ -28,7 +28,7 @@ from backends.reference.aberrations import (
     transition,
 )
 from backends.reference.portals import Portals, nearest_portal_hits, teleport
-from backends.reference.shading import ShadingSettings, shade, to_uint8
+from backends.reference.shading import Lights, ShadingSettings, light_sum, shade, to_uint8
 from backends.reference.traverse import Geometry, MeshHits, nearest_mesh_hits
 
 __all__ = [
@@ -39,8 +39,10 @@ __all__ = [
     "TraceResult",
     "advance",
     "enter_at_start",
+    "journey",
     "next_event",
     "nudge_of",
+    "shadow_rays_lit",
     "t_min_of",
     "tie_window",
     "to_uint8",
@@ -49,6 +51,8 @@ __all__ = [
 
 # Event kinds; also the kinds of surface a ray can be leaving (MISS: none).
 MISS, MESH, ABERRATION, PORTAL = 0, 1, 2, 3
+# How a journey ends besides MESH and MISS: out of events, or a shadow ray's reach covered.
+LIMIT, REACHED = 4, 5
 #: The id of "no surface" (``leaving_id`` of a ray that starts in free space).
 NO_SURFACE = -1
 #: ``t_min`` is this fraction of the origin's magnitude (at least of 1): hits at or below it are ignored.
@@ -160,34 +164,99 @@ def trace(
     directions: np.ndarray,
     world_origin: np.ndarray,
     space: Space | None = None,
+    lights: Lights | None = None,
 ) -> TraceResult:
     """Trace primary rays from ``origin`` (packed coordinates) along unit ``directions`` (N, 3).
 
     ``world_origin`` is the packed origin, added back where world coordinates
     matter (the triplanar checker). ``space`` holds the aberrations and portals
-    (none when omitted).
+    (none when omitted); ``lights`` the Light entities (none: the implicit sun along ``light_dir``).
     """
     space = space or Space()
     result = TraceResult.empty(len(directions), settings.background)
     state = RayState.primary(origin, directions)
     with np.errstate(all="ignore"):
         enter_at_start(space, state)
-        while len(state):
-            limited = state.events >= settings.max_events
-            if np.any(limited):
-                _finish_limit(state.subset(np.flatnonzero(limited)), settings, result)
-                state = state.subset(np.flatnonzero(~limited))
-                if not len(state):
-                    break
-            event = next_event(geo, space, state)
-            missed = event.kind == MISS
-            _finish_miss(state.subset(np.flatnonzero(missed)), result)
-            hit = np.flatnonzero(event.kind == MESH)
-            if hit.size:
-                _finish_mesh(geo, settings, space, state.subset(hit), event.mesh, hit, world_origin, result)
-            moving = np.flatnonzero((event.kind == ABERRATION) | (event.kind == PORTAL))
-            state = advance(space, state.subset(moving), event.subset(moving))
+        end = journey(geo, space, state, settings.max_events)
+        result.events[:] = end.state.events
+        result.color[end.kind == LIMIT] = settings.event_limit_color
+        hit = np.flatnonzero(end.kind == MESH)
+        if hit.size:
+            _finish_mesh(geo, settings, space, end.state.subset(hit), end.mesh, hit, world_origin, result, lights)
     return result
+
+
+@dataclass(frozen=True)
+class JourneyEnd:
+    """How each ray's journey ended (in input order): its kind, final state and mesh hit."""
+
+    kind: np.ndarray  # (N,) MESH, MISS, LIMIT or REACHED
+    state: RayState  # the state before the final event
+    mesh: MeshHits  # the hit of MESH rays
+
+
+def journey(
+    geo: Geometry, space: Space, state: RayState, max_events: int, reach: np.ndarray | None = None
+) -> JourneyEnd:
+    """Run rays event after event until a mesh hit, a miss, ``max_events`` or (``reach``, world path length per
+    ray) the length reached: the camera's rays and the shadow rays take the same journey."""
+    n = len(state)
+    kind = np.full(n, MISS, np.int64)
+    mesh = MeshHits(np.full(n, np.inf), np.full(n, -1, np.int64), np.full(n, -1, np.int64), np.zeros((n, 3)))
+    ended: list[RayState] = []
+    while len(state):
+        limited = state.events >= max_events
+        if np.any(limited):
+            kind[state.index[limited]] = LIMIT
+            ended.append(state.subset(np.flatnonzero(limited)))
+            state = state.subset(np.flatnonzero(~limited))
+            if not len(state):
+                break
+        event = next_event(geo, space, state)
+        if reach is not None:  # an event (or the sky) at or past the reach: the ray got there unblocked
+            past = state.length + event.t * np.linalg.norm(state.r, axis=1) >= reach[state.index]
+            event = Event(np.where(past, REACHED, event.kind), event.t, event.mesh, event.face, event.portal)
+        done = np.flatnonzero((event.kind == MISS) | (event.kind == MESH) | (event.kind == REACHED))
+        rows = state.index[done]
+        kind[rows] = event.kind[done]
+        for name in ("t", "instance", "triangle", "bary"):
+            getattr(mesh, name)[rows] = getattr(event.mesh, name)[done]
+        ended.append(state.subset(done))
+        moving = np.flatnonzero((event.kind == ABERRATION) | (event.kind == PORTAL))
+        state = advance(space, state.subset(moving), event.subset(moving))
+    return JourneyEnd(kind, _in_order(ended, n), mesh)
+
+
+def _in_order(parts: list[RayState], n: int) -> RayState:
+    """The rays of ``parts`` (each ray in exactly one) as one state, row i the ray of index i."""
+    if not parts:
+        return RayState.primary(np.zeros(3), np.zeros((0, 3)))
+    joined = {name: np.concatenate([vars(p)[name] for p in parts]) for name in vars(parts[0])}
+    order = np.argsort(joined["index"], kind="stable")
+    return RayState(**{name: value[order] for name, value in joined.items()})
+
+
+#: A shadow ray starts this far (relative to the point's size, at least 1) off the surface along its
+#: normal: beyond the rounding of the hit point, so the surface it leaves is never hit (float32: SHADOW_BIAS).
+SHADOW_BIAS_RELATIVE = 1e-7
+
+
+def shadow_rays_lit(
+    geo: Geometry,
+    settings: ShadingSettings,
+    space: Space,
+    points: np.ndarray,
+    normals: np.ndarray,
+    towards: np.ndarray,
+    reach: np.ndarray,
+) -> np.ndarray:
+    """Whether each point (packed coordinates) is lit: its shadow ray, started off the surface along its
+    normal towards the light, ends in the sky or past ``reach`` (docs/semantics.md, "Lights and shadows")."""
+    bias = SHADOW_BIAS_RELATIVE * np.maximum(1.0, np.linalg.norm(points, axis=1))
+    state = RayState.primary(points + bias[:, None] * normals, towards)
+    enter_at_start(space, state)
+    end = journey(geo, space, state, settings.max_events, reach)
+    return (end.kind == MISS) | (end.kind == REACHED)
 
 
 def enter_at_start(space: Space, state: RayState) -> None:
@@ -264,17 +333,6 @@ def advance(space: Space, state: RayState, event: Event) -> RayState:
     return state
 
 
-def _finish_limit(state: RayState, settings: ShadingSettings, out: TraceResult) -> None:
-    """Rays that used all their events: event-limit colour, no depth, no instance."""
-    out.color[state.index] = settings.event_limit_color
-    out.events[state.index] = state.events
-
-
-def _finish_miss(state: RayState, out: TraceResult) -> None:
-    """Rays that found nothing keep the background colour and +inf depth."""
-    out.events[state.index] = state.events
-
-
 def _finish_mesh(
     geo: Geometry,
     settings: ShadingSettings,
@@ -284,12 +342,22 @@ def _finish_mesh(
     rows: np.ndarray,
     world_origin: np.ndarray,
     out: TraceResult,
+    lights: Lights | None = None,
 ) -> None:
     """Shade mesh hits and record L, Λ, entity id and event count (``rows`` select the hits of ``mesh``)."""
     hits = MeshHits(mesh.t[rows], mesh.instance[rows], mesh.triangle[rows], mesh.bary[rows])
     step = hits.t * np.linalg.norm(state.r, axis=1)
     position = state.o + hits.t[:, None] * state.r
-    out.color[state.index] = shade(geo, settings, hits, state.r, position + world_origin)
+    lighting = None
+    if lights is not None and len(lights):
+
+        def lit(at: np.ndarray, n: np.ndarray, towards: np.ndarray, reach: np.ndarray) -> np.ndarray:
+            return shadow_rays_lit(geo, settings, space, position[at], n, towards, reach)
+
+        def lighting(n: np.ndarray) -> np.ndarray:
+            return light_sum(lights, n, position, lit)
+
+    out.color[state.index] = shade(geo, settings, hits, state.r, position + world_origin, lighting)
     out.depth[state.index] = state.length + step
     out.perceived[state.index] = state.perceived + step * perceived_per_world(space.boxes, state.aberration, state.w)
     out.instance[state.index] = geo.entity[hits.instance]

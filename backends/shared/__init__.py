@@ -18,6 +18,7 @@ macros a prelude must provide.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from importlib import resources
 from typing import ClassVar
 
@@ -256,8 +257,8 @@ class UploadedScene:
         portal or a box (all outside the camera's pyramid, the camera in no box). Every ray then has one leg,
         and the Euclidean variant gives the same frame without paying for the space's code."""
         features = self._features
-        if not (features.portals or features.aberration_modes):
-            return features
+        if not (features.portals or features.aberration_modes) or features.shadows:
+            return features  # shadow rays start anywhere: they may meet what no primary ray does
         aspect = width / height
         portal_root = self._portal_root if features.portals else None
         if portal_root is not None and view_reaches(camera, aspect, self._origin, self._space_nodes, portal_root):
@@ -268,4 +269,4 @@ class UploadedScene:
             near = CAMERA_FACE_MARGIN * max(1.0, float(np.linalg.norm(position)))
             if view_reaches(camera, aspect, self._origin, nodes, root) or rows_at(nodes, root, position, near):
                 return features
-        return Features(False, frozenset(), features.max_events)
+        return replace(features, portals=False, aberration_modes=frozenset())

@@ -22,6 +22,7 @@ typedef struct SceneTables {
     __global const TlasNode* tlas_nodes;
     __global const TriangleBlock* triangle_blocks;
     __global const SpaceNode* space_nodes;
+    __global const Light* lights;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -39,3 +40,4 @@ typedef struct SceneTables {
 #define TLAS_NODE(i) (sc.tlas_nodes[(i)])
 #define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])
 #define SPACE_NODE(i) (sc.space_nodes[(i)])
+#define LIGHT(i) (sc.lights[(i)])

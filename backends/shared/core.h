@@ -33,12 +33,14 @@
  *               empty in GLSL), SETTINGS, TRIANGLE(i), TRIANGLE_UV(i),
  *               BVH_NODE(i) (a BvhNode, a BvhCompactNode with BVH_COMPACT, or a Bvh4Node /
  *               Bvh8Node by BVH_WIDTH), INSTANCE(i), MATERIAL(i), ABERRATION(i), PORTAL(i),
- *               TLAS_NODE(i), TRIANGLE_BLOCK(i), SPACE_NODE(i) (records, from the bindings file)
+ *               TLAS_NODE(i), TRIANGLE_BLOCK(i), SPACE_NODE(i), LIGHT(i) (records, from the bindings file)
  *
  * Compile-time defines (engine.packed.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport
  *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
+ *   HAS_LIGHTS         Light entities exist (the lights table), else the implicit sun along light_dir
+ *   HAS_SHADOWS        a light casts shadows: shadow rays take the journey (journey.h, shadow_lit)
  *   MAX_EVENTS         events a ray may take (the settings' max_events, which it bounds)
  *   REAL_IS_DOUBLE     trace in double precision
  *   EDGE_FALLBACK_FP64 float tracer: recompute an edge function that is exactly
@@ -79,6 +81,12 @@
 #endif
 #ifndef HAS_ABERRATIONS
 #define HAS_ABERRATIONS 0
+#endif
+#ifndef HAS_LIGHTS
+#define HAS_LIGHTS 0
+#endif
+#ifndef HAS_SHADOWS
+#define HAS_SHADOWS 0
 #endif
 #ifndef REAL_IS_DOUBLE
 #define REAL_IS_DOUBLE 0
@@ -153,12 +161,16 @@
 /* A space tree's nodes grow by this fraction of max(1, |o|) around a ray from o (or a point o): far above
  * the rounding of the quad and box tests in their frames (space.h, space_slab). */
 #define SPACE_PAD REAL_C(1.0e-12)
+/* A shadow ray starts this fraction of max(1, |p|) off the surface along its normal (the reference's). */
+#define SHADOW_BIAS REAL_C(1.0e-7)
 #else
 #define T_MIN_RELATIVE REAL_C(1.0e-5)
 #define TIE_RELATIVE REAL_C(2.0e-5)
 #define NUDGE_RELATIVE REAL_C(5.0e-5)
 #define BOX_WIDEN REAL_C(4.8e-7)
 #define SPACE_PAD REAL_C(1.0e-5)
+/* Ten t_min: past the hit point's rounding (a few ulps of |p| over the cosine) down to grazing light. */
+#define SHADOW_BIAS REAL_C(1.0e-4)
 #endif
 /* A vector shorter than this is not normalised: the previous direction is kept (no NaN ever). */
 #define MIN_NORM REAL_C(1.0e-12)

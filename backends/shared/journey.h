@@ -3,18 +3,11 @@
 
 /* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
-/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
- * vector normalised, then rotated (never a difference of two world points). */
-FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
+/* A ray's state at its start (docs/semantics.md section 1): from o along unit d, no box yet, nothing left. */
+FORCE_INLINE Ray start_ray(real3 o, real3 d)
 {
-    real tan_half = cam.lens.x;
-    real aspect = cam.lens.y;
-    real x = (REAL(2.0f) * (TO_REAL(i) + REAL(0.5f)) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
-    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + REAL(0.5f)) / TO_REAL(cam.size.y)) * tan_half;
-    real3 cam_dir = normalize(R3(x, y, -1.0f));
-    real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
     Ray ray;
-    ray.o = cam.position.xyz;
+    ray.o = o;
     ray.r = d;
     ray.o_len = length(ray.o);
     ray.r_len = length(d);
@@ -30,6 +23,19 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
     ray.leaving_kind = -1;
     ray.leaving = -1;
     return ray;
+}
+
+/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
+ * vector normalised, then rotated (never a difference of two world points). */
+FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
+{
+    real tan_half = cam.lens.x;
+    real aspect = cam.lens.y;
+    real x = (REAL(2.0f) * (TO_REAL(i) + REAL(0.5f)) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
+    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + REAL(0.5f)) / TO_REAL(cam.size.y)) * tan_half;
+    real3 cam_dir = normalize(R3(x, y, -1.0f));
+    real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
+    return start_ray(cam.position.xyz, d);
 }
 
 #if HAS_ABERRATIONS
@@ -63,26 +69,28 @@ FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, int next, real3 lo, real3
 }
 #endif
 
-Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
+/* How a journey ends (Journey.end): a mesh hit, the sky, out of events, or a shadow ray's reach covered. */
+#define END_MESH 0
+#define END_MISS 1
+#define END_LIMIT 2
+#define END_REACHED 3
+
+STRUCT_BEGIN(Journey)
+    Ray ray;     /* the state before the final event */
+    MeshHit hit; /* END_MESH: the hit on ray's leg */
+    int end;
+STRUCT_END(Journey)
+
+/* A ray's journey from its start, event after event (docs/semantics.md sections 3-13): the camera's rays
+ * and the shadow rays take this one. clear: the start's clearance to every instance (the camera's, lens.z;
+ * 0 for none); reach: the world path length at which the ray counts as arrived (REAL_MAX for none). */
+FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real reach)
 {
-    Ray ray = primary_ray(cam, i, j);
-    Pixel px;
-    px.color = quantize_rgba(SETTINGS.background.xyz);
-    px.depth = F_INF;
-    px.perceived = F_INF;
-    px.instance = -1;
-    px.events = 0;
+    Journey trip;
+    trip.end = END_MISS;
 #if HAS_ABERRATIONS
-    /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
     real3 sigma_lo = cam.sigma_min.xyz;
     real3 sigma_hi = cam.sigma_max.xyz;
-    /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
-     * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
-    int camera_box = cam.size.z;
-    if (camera_box != -1) {
-        int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
-        ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
-    }
 #endif
     MeshHit hit;
     hit.t = REAL_MAX;
@@ -93,7 +101,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
         if (ray.n >= max_events) {
-            px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
+            trip.end = END_LIMIT;
             break;
         }
         /* 1. The nearest of: a linked portal quad, a box face, a mesh triangle, past the point the ray
@@ -117,10 +125,16 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #else
         bool search = true;
 #endif
+#if HAS_SHADOWS
+        /* A shadow ray's mesh search ends at its reach: a mesh past it does not block it. */
+        if (reach < REAL_MAX) {
+            t_cut = min(t_cut, (reach - ray.L) / ray.r_len);
+        }
+#endif
 #if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH && HAS_SPACE
         /* The first leg starts at the camera: a search that ends (with the tie window for rounding) nearer
          * than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
-        if (pass == 0 && (t_cut + REAL(2.0f) * tie_window(ray.o_len, t_cut)) * ray.r_len < cam.lens.z) {
+        if (pass == 0 && (t_cut + REAL(2.0f) * tie_window(ray.o_len, t_cut)) * ray.r_len < clear) {
             search = false;
         }
 #endif
@@ -160,12 +174,29 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
 #endif
         }
 #endif
+#if HAS_SHADOWS
+        /* A shadow ray whose next event (or the sky) lies at or past its reach got there unblocked. */
+        if (reach < REAL_MAX) {
+            real t_event = kind == EVENT_MESH ? mesh.t : REAL_MAX;
+#if HAS_PORTALS
+            t_event = kind == EVENT_PORTAL ? portal.t : t_event;
+#endif
+#if HAS_ABERRATIONS
+            t_event = kind == EVENT_ABERRATION ? face.t : t_event;
+#endif
+            if (kind == EVENT_NONE || ray.L + t_event * ray.r_len >= reach) {
+                trip.end = END_REACHED;
+                break;
+            }
+        }
+#endif
         /* 2. Nothing: background. A mesh: shade, stop. */
         if (kind == EVENT_NONE) {
             break;
         }
         if (kind == EVENT_MESH) {
             hit = mesh; /* shaded after the loop */
+            trip.end = END_MESH;
             break;
         }
         ray.n += 1;
@@ -188,6 +219,54 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             ray.leaving = face.row;
         }
 #endif
+    }
+    trip.ray = ray;
+    trip.hit = hit;
+    return trip;
+}
+
+#if HAS_SHADOWS
+/* Whether a point (camera-relative) is lit by a light towards (unit) and reach away along the journey
+ * (docs/semantics.md, "Lights and shadows"): its shadow ray, started SHADOW_BIAS off the surface along n
+ * in the transition from no box into the box there, ends in the sky or past its reach. */
+FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, real3 towards, real reach)
+{
+    Ray ray = start_ray(position + (SHADOW_BIAS * max(REAL(1.0f), length(position))) * n, towards);
+#if HAS_ABERRATIONS
+    ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)),
+                    cam.sigma_min.xyz, cam.sigma_max.xyz);
+#endif
+    int end = journey(SCENE_PASS cam, ray, REAL(0.0f), reach).end;
+    return end == END_MISS || end == END_REACHED;
+}
+#endif
+
+Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
+{
+    Ray ray = primary_ray(cam, i, j);
+    Pixel px;
+    px.color = quantize_rgba(SETTINGS.background.xyz);
+    px.depth = F_INF;
+    px.perceived = F_INF;
+    px.instance = -1;
+    px.events = 0;
+#if HAS_ABERRATIONS
+    /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
+    real3 sigma_lo = cam.sigma_min.xyz;
+    real3 sigma_hi = cam.sigma_max.xyz;
+    /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
+     * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
+    int camera_box = cam.size.z;
+    if (camera_box != -1) {
+        int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
+        ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
+    }
+#endif
+    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX);
+    ray = end.ray;
+    MeshHit hit = end.hit;
+    if (end.end == END_LIMIT) {
+        px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
     }
     /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
      * code masked on every pass. */

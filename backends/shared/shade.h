@@ -17,6 +17,55 @@ bool checker_odd_fp64(double a, double b, double c)
 }
 #endif
 
+#if HAS_SHADOWS
+/* journey.h: whether the shadow ray from position towards a light reaches it (declared here, shade needs it). */
+FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, real3 towards, real reach);
+#endif
+
+#if HAS_LIGHTS
+/* The lights' sum (docs/semantics.md, "Lights and shadows"): colour * max(0, n.l) * falloff, a point light's
+ * falloff 1/d^2 (times (clamp(1 - (d/range)^4, 0, 1))^2 with a range), shadowing lights' terms only where
+ * their shadow rays get there; a light behind the surface sends none. */
+FORCE_INLINE float3 light_sum(SCENE_DECL Camera cam, real3 n, real3 position)
+{
+    float3 total = F3(0.0f, 0.0f, 0.0f);
+    int count = min(SETTINGS.lights.x, MAX_LIGHTS);
+    for (int k = 0; k < count; ++k) {
+        Light light = LIGHT(k);
+        real3 towards = light.vector.xyz;
+        float falloff = 1.0f;
+        real reach = REAL_MAX;
+        if (light.meta.x == LIGHT_POINT) {
+            real3 d = light.vector.xyz - position;
+            real distance = length(d);
+            if (!(distance > REAL(0.0f))) {
+                continue;
+            }
+            towards = d / distance;
+            float dist = TO_FLOAT(distance);
+            falloff = 1.0f / (dist * dist);
+            if (light.color.w > 0.0f) {
+                float q = dist / light.color.w;
+                float window = clamp(1.0f - q * q * q * q, 0.0f, 1.0f);
+                falloff *= window * window;
+            }
+            reach = distance;
+        }
+        float weight = max(0.0f, TO_FLOAT(dot(n, towards))) * falloff;
+        if (!(weight > 0.0f)) {
+            continue;
+        }
+#if HAS_SHADOWS
+        if (light.meta.y != 0 && !shadow_lit(SCENE_PASS cam, position, n, towards, reach)) {
+            continue;
+        }
+#endif
+        total += light.color.xyz * weight;
+    }
+    return total;
+}
+#endif
+
 /* base * checker * (ambient + (1 - ambient) * max(0, n.l)), n the geometric normal
  * (object normal through the transpose of world_to_object's 3x3) turned to face the ray.
  * position is camera-relative; cam.origin turns it into world space for triplanar cells. */
@@ -33,7 +82,12 @@ FORCE_INLINE float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 pos
         n = -n;
     }
     float ambient = SETTINGS.shading.x;
+#if HAS_LIGHTS
+    /* With Light entities: their sum (light_sum) in place of the implicit sun's max(0, n.l). */
+    float3 lambert = light_sum(SCENE_PASS cam, n, position);
+#else
     float lambert = max(0.0f, TO_FLOAT(dot(n, TO_REAL3(SETTINGS.light_dir.xyz))));
+#endif
     Material mat = MATERIAL(inst.meta.y);
     float cell = mat.color.w;
     float factor = 1.0f;
@@ -61,5 +115,9 @@ FORCE_INLINE float3 shade(SCENE_DECL Camera cam, MeshHit hit, real3 r, real3 pos
         }
         factor = odd ? 0.5f : 1.0f;
     }
+#if HAS_LIGHTS
+    return mat.color.xyz * (factor * (F3(ambient, ambient, ambient) + (1.0f - ambient) * lambert));
+#else
     return mat.color.xyz * (factor * (ambient + (1.0f - ambient) * lambert));
+#endif
 }

@@ -18,14 +18,24 @@ from typing import Any
 import numpy as np
 from imgui_bundle import imgui
 
-from components import ABERRATION_EXITS, ABERRATION_MODES, Aberration, Camera, Mesh, Portal, Transform
+from components import (
+    ABERRATION_EXITS,
+    ABERRATION_MODES,
+    LIGHT_KINDS,
+    Aberration,
+    Camera,
+    Light,
+    Mesh,
+    Portal,
+    Transform,
+)
 from editor.model import EditorModel
 from editor.panels import widgets as ui
 from engine.assets import PRIMITIVES
 from engine.maths import quat_from_euler_deg, quat_to_euler_deg
 
 #: Components in the order the inspector shows them.
-SECTIONS: tuple[type, ...] = (Transform, Camera, Mesh, Aberration, Portal)
+SECTIONS: tuple[type, ...] = (Transform, Camera, Mesh, Aberration, Portal, Light)
 #: The label shown for the inert choice of a portal's target.
 NO_TARGET = "(none: inert)"
 
@@ -53,7 +63,10 @@ FIELD_HINTS: dict[tuple[str, str], Hint] = {
     ("Aberration", "mode"): Hint(choices=ABERRATION_MODES),
     ("Aberration", "exit"): Hint(choices=ABERRATION_EXITS, help="radial and additive only"),
     ("Aberration", "priority"): Hint(0.05, help="the highest priority wins where boxes overlap"),
-    ("Settings", "light_dir"): Hint(0.01, label="light direction"),
+    ("Light", "kind"): Hint(choices=LIGHT_KINDS, help="a sun shines along its -Z; a point light from its position"),
+    ("Light", "intensity"): Hint(0.05, 0.0, 1e6, help="a point light's falls off as 1/d^2: 9 is a unit sun at 3"),
+    ("Light", "range"): Hint(0.05, 0.0, 1e6, help="a point light fades to nothing here (0: no range)"),
+    ("Settings", "light_dir"): Hint(0.01, label="light direction", help="the implicit sun's, without Light entities"),
     ("Settings", "ambient"): Hint(0.005, 0.0, 1.0),
     ("Settings", "max_events"): Hint(0.1, 1, 1024, label="max events"),
 }
@@ -138,6 +151,9 @@ class InspectorPanel:
             if changed:
                 self.error = model.set_portal_target(entity, picked)
             return
+        if kind is Light and field.name == "range":
+            self._light_range(model, entity, component, key)
+            return
         choices: list[str] = []
         if kind is Mesh and field.name == "asset":
             choices = sorted(set(model.scene.assets)) + [p for p in PRIMITIVES if p not in model.scene.assets]
@@ -149,6 +165,16 @@ class InspectorPanel:
             imgui.end_disabled()
         if changed:
             self.error = model.edit(entity, kind, merge_key=key, **{field.name: new})
+
+    def _light_range(self, model: EditorModel, entity: int, light: Light, key: tuple[str, str, str]) -> None:
+        """A point light's range as a number, 0 for none; a sun has none."""
+        if light.kind != "point":
+            imgui.begin_disabled()
+        changed, new = self._widget("Light", "range", "float", light.range or 0.0, [])
+        if light.kind != "point":
+            imgui.end_disabled()
+        if changed:
+            self.error = model.edit(entity, Light, merge_key=key, range=float(new) if new > 0.0 else None)
 
     def _rotation(self, model: EditorModel, entity: int, name: str, rotation: tuple[float, ...]) -> None:
         cached = self._euler.get(name)

@@ -100,6 +100,12 @@ def _add_menu(shell: EditorShell) -> None:
     if ui.menu_item("Portal pair"):
         model.add_portal_pair(spot)
     ui.tooltip("two linked portals")
+    if ui.menu_item("Sun"):
+        model.add_light("sun", spot)
+    ui.tooltip("a light shining along its -Z from the sky, casting shadows through deformed space")
+    if ui.menu_item("Point light"):
+        model.add_light("point", spot)
+    ui.tooltip("a light at a point, fading with the square of the distance")
     imgui.separator()
     label = "Camera to view" if model.scene.camera_entity is not None else "Camera at view"
     if ui.menu_item(label):

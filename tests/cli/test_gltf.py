@@ -14,7 +14,7 @@ import pytest
 from aberrant.cli import main
 from aberrant.importers.gltf import GltfError, load_gltf
 from aberrant.levels import open_level
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from engine.maths import quat_to_matrix, trs_matrix
 
 #: A unit cube's 8 corners and 12 triangles.
@@ -113,6 +113,24 @@ def test_nodes_become_entities_with_world_transforms_and_components(tmp_path, gl
         assert np.allclose(scene.get(scene.camera_entity, Transform).position, [0, 0.5, 4])
 
 
+def test_light_extras_become_lights_shining_along_the_nodes_minus_z(tmp_path, monkeypatch):
+    monkeypatch.setenv("ABERRANT_CACHE_DIR", str(tmp_path / "cache"))
+    down = [-math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)]  # -90 degrees about X: -Z onto -Y
+    nodes = [
+        *level_nodes(),
+        {"name": "Sun", "rotation": down, "extras": {"aberrant": {"light": {"kind": "sun", "intensity": 0.8}}}},
+        {"name": "Lamp", "translation": [0, 3, 0],
+         "extras": {"aberrant": {"light": {"kind": "point", "intensity": 9, "shadows": False, "range": 12}}}},
+    ]  # fmt: skip
+    with open_level(write_gltf(tmp_path, nodes)) as level:
+        scene = level.scene
+        assert scene.get(scene.entity("Sun"), Light) == Light("sun", intensity=0.8)
+        forward = quat_to_matrix(scene.get(scene.entity("Sun"), Transform).rotation) @ [0, 0, -1]
+        assert np.allclose(forward, [0, -1, 0])
+        assert scene.get(scene.entity("Lamp"), Light) == Light("point", intensity=9.0, shadows=False, range=12.0)
+        assert scene.get(scene.entity("Lamp"), Transform).position == (0.0, 3.0, 0.0)
+
+
 def test_render_a_glb_directly_with_the_reference_backend(tmp_path, capsys, monkeypatch):
     from conftest import require_backend
 
@@ -143,6 +161,10 @@ def _broken(nodes: list[dict[str, Any]], index: int, **changes: Any) -> list[dic
         (lambda n: _broken(n, 3, extras={"aberrant": {"teleporter": {}}}),
          ["node 'Squash'", "extras.aberrant.teleporter"]),
         (lambda n: _broken(n, 3, extras={"aberrant": "portal"}), ["node 'Squash'", "extras.aberrant"]),
+        (lambda n: _broken(n, 3, extras={"aberrant": {"light": {"kind": "spot"}}}),
+         ["node 'Squash'", "extras.aberrant.light.kind", "'sun', 'point'"]),
+        (lambda n: _broken(n, 3, extras={"aberrant": {"light": {}, "portal": {}}}),
+         ["node 'Squash'", "one component", "light, portal"]),
     ],
 )  # fmt: skip
 def test_bad_extras_name_the_file_node_and_field(tmp_path, change, needles, monkeypatch):

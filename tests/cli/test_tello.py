@@ -11,7 +11,7 @@ import pytest
 
 from aberrant.cli import main
 from aberrant.importers.tello import TelloError, import_tello, read_mesh_resource
-from components import Aberration, Mesh, Portal, Transform
+from components import MAX_LIGHTS, Aberration, Light, Mesh, Portal, Transform
 from engine.maths import quat_to_matrix, trs_matrix
 from engine.scene_file import load_scene
 
@@ -197,7 +197,29 @@ def test_portals_are_linked_pairwise_with_unique_names(tmp_path):
         camera = scene.get(scene.camera_entity, Transform)
         assert (scene.name_of(scene.camera_entity), camera.position) == ("Cam", (0.0, 1.0, 4.0))
         assert any("ProceduralMesh" in w and "Blob" in w for w in result.warnings)
-        assert any("PointLight" in w for w in result.warnings)
+        assert scene.get(scene.entity("Lamp_light"), Light).kind == "point"
+    finally:
+        scene.close()
+
+
+def test_point_lights_become_shadowing_point_lights_at_their_world_position(tmp_path):
+    objects = [
+        obj(1, "Floor", transform((0, 0, 0), (-math.sqrt(0.5), 0, 0, math.sqrt(0.5)), (10, 10, 0.1)),
+            {"type": 1, "mesh": BOX}),
+        obj(2, "Group", transform((1, 2, 3))),
+        obj(3, "Lamp", transform((0, 1, 0)), {"type": 4}, parent=2),
+        *(obj(10 + k, f"Extra{k}", transform((k, 3, 0)), {"type": 4}) for k in range(MAX_LIGHTS)),
+    ]  # fmt: skip
+    result = import_tello(write_tello(tmp_path / "Lamps", objects), TELLO / "Mesh", tmp_path / "lamps.json")
+    result.scene.close()
+    scene = load_scene(tmp_path / "lamps.json")
+    try:
+        lights = scene.query(Light)
+        assert len(lights) == MAX_LIGHTS and all(light.kind == "point" and light.shadows for _, light in lights)
+        lamp = scene.entity("Lamp_light")
+        assert scene.get(lamp, Transform).position == (1.0, 3.0, 3.0)  # the parent's offset composed
+        assert scene.get(lamp, Light).intensity == pytest.approx((0.5 * 10) ** 2)  # the floor's extent
+        assert any("dropped: game object" in w and "Extra7" in w for w in result.warnings)
     finally:
         scene.close()
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from demos import build_demo
 from editor.model import EditorModel
 from engine.assets import PRIMITIVES
@@ -62,6 +62,22 @@ def test_add_each_kind(model):
     for _ in range(3):
         model.undo()
     assert len(model.scene.entities()) == start
+
+
+def test_add_lights_a_sun_and_a_point_light_each_one_undo_step(model):
+    before = text(model)
+    sun = model.add_light("sun", (0.0, 1.0, 0.0))
+    lamp = model.add_light("point", (2.0, 0.0, 0.0))
+    assert model.scene.get(sun, Light).kind == "sun" and model.scene.get(sun, Light).shadows
+    assert model.scene.get(lamp, Light).kind == "point"
+    assert model.scene.get(lamp, Transform).position == (2.0, 3.0, 0.0)
+    assert [model.scene.name_of(e) for e in (sun, lamp)] == ["sun", "lamp"]
+    assert model.edit(lamp, Light, range=8.0) is None and model.scene.get(lamp, Light).range == 8.0
+    assert "range" in (model.edit(sun, Light, range=8.0) or "")  # a sun has none: refused, named
+    model.scene.validate()
+    for _ in range(3):
+        model.undo()
+    assert text(model) == before
 
 
 def test_import_registers_a_new_asset_and_undo_removes_it(tmp_path):

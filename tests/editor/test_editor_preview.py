@@ -54,6 +54,18 @@ def test_preview_lines_colours_and_debug_draw(scene):
     assert sum(np.allclose(c, (1.0, 1.0, 1.0)) for c in colors) == 12
 
 
+def test_lights_draw_a_star_or_an_arrow_along_minus_z_in_their_colour(scene):
+    scene.add_light("lamp", "point", position=(0.0, 3.0, 0.0), color=(1.0, 1.0, 0.0))
+    scene.add_light("sun", "sun", euler_deg=(-90.0, 0.0, 0.0), color=(0.0, 1.0, 1.0))
+    segments, colors = preview_lines(scene, show_camera=False)
+    star = segments[[np.allclose(c, (1.0, 1.0, 0.0)) for c in colors]]
+    arrow = segments[[np.allclose(c, (0.0, 1.0, 1.0)) for c in colors]]
+    assert len(star) == 7 and np.allclose(star.reshape(-1, 3).mean(axis=0), (0.0, 3.0, 0.0))
+    assert len(arrow) == 9 and np.allclose(arrow[0], [[0, 0, 0], [0, -1, 0]])  # the shaft: down, as it shines
+    _, colors = preview_lines(scene, scene.entity("sun"), show_camera=False)
+    assert sum(np.allclose(c, (1.0, 1.0, 1.0)) for c in colors) == 9
+
+
 def test_box_edges_are_the_unit_box_placed(scene):
     segments, _ = preview_lines(scene, show_camera=False)
     box = segments[:12].reshape(-1, 3)

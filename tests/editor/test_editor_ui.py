@@ -10,7 +10,7 @@ pytest.importorskip("imgui_bundle", reason="the editor extra is not installed: p
 
 from imgui_bundle import imgui
 
-from components import Aberration, Mesh, Portal, Transform
+from components import Aberration, Light, Mesh, Portal, Transform
 from demos import build_demo
 from editor.backend_host import BackendHost
 from editor.headless import HeadlessImgui
@@ -77,6 +77,13 @@ def test_add_each_kind_of_entity_from_the_menu(h):
     assert h.model.scene.has(h.model.scene.entity("aberration"), Aberration)
     h.menu("Add", "Portal pair")
     assert h.model.scene.get(h.model.scene.entity("portal_a"), Portal).target == "portal_b"
+    h.menu("Add", "Point light")
+    assert h.model.scene.get(h.model.scene.entity("lamp"), Light).kind == "point"
+    h.frames()
+    h.click("Light.shadows")  # the inspector shows the new light's fields
+    assert h.model.scene.get(h.model.scene.entity("lamp"), Light).shadows is False
+    h.menu("Add", "Sun")
+    assert h.model.scene.get(h.model.scene.entity("sun"), Light).kind == "sun"
     h.menu("Add", "Camera to view")
     camera = h.model.scene.get(h.model.scene.camera_entity, Transform)
     assert camera.position == pytest.approx(tuple(h.ui.view.position))

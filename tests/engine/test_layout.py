@@ -13,8 +13,16 @@ from engine.layout import Precision
 # up to its largest member alignment.
 EXPECTED = {
     ("settings", "f32"): (
-        {"background": 0, "light_dir": 16, "event_limit_color": 32, "shading": 48, "counts": 64, "space_roots": 80},
-        96,
+        {
+            "background": 0,
+            "light_dir": 16,
+            "event_limit_color": 32,
+            "shading": 48,
+            "counts": 64,
+            "space_roots": 80,
+            "lights": 96,
+        },
+        112,
     ),
     ("triangles", "f32"): ({"v0": 0, "v1": 16, "v2": 32}, 48),
     ("triangle_uvs", "f32"): ({"uv01": 0, "uv2": 16}, 32),
@@ -42,6 +50,8 @@ EXPECTED = {
     ("aberrations", "f64"): ({"world_to_local": 0, "rotation": 96, "deformation": 192, "meta": 224}, 256),
     ("portals", "f32"): ({"world_to_local": 0, "transfer": 48, "meta": 96}, 112),
     ("portals", "f64"): ({"world_to_local": 0, "transfer": 96, "meta": 192}, 224),
+    ("lights", "f32"): ({"vector": 0, "color": 16, "meta": 32}, 48),
+    ("lights", "f64"): ({"vector": 0, "color": 32, "meta": 48}, 64),
     ("camera", "f32"): (
         {
             "position": 0,

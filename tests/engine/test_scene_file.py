@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from demos import build_demo
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene, save_scene, scene_to_json
@@ -18,7 +18,7 @@ from engine.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 KNOT = ROOT / "demos" / "assets" / "knot.obj"
-KINDS = (Transform, Camera, Mesh, Aberration, Portal)
+KINDS = (Transform, Camera, Mesh, Aberration, Portal, Light)
 
 
 def snapshot(scene: Scene) -> dict[str, object]:
@@ -71,6 +71,8 @@ def every_kind_scene(tmp_path: Path) -> Scene:
     scene.add_portal("one_way", target="door_a", position=(0.0, 1.0, -3.0), debug_draw=False)
     scene.add_portal("inert", position=(0.0, 1.0, 3.0))
     scene.create_entity("marker", Transform(position=(0.5, 0.5, 0.5)))
+    scene.add_light("sun", "sun", euler_deg=(-60.0, 30.0, 0.0), color=(1.0, 0.9, 0.8), intensity=1.25)
+    scene.add_light("lamp", "point", position=(0.0, 2.5, 0.0), intensity=12.0, shadows=False, range=9.5)
     scene.set_camera((0.0, 1.6, 6.0), look_at=(0.0, 1.0, 0.0), fov_deg=72.5, speed=4.25, name="eye")
     return scene
 
@@ -108,7 +110,11 @@ def test_saved_file_is_canonical_json(tmp_path):
     assert doc["assets"] == {"ball": {"primitive": "sphere"}, "knot": {"path": "meshes/knot.obj"}}
     assert [e["name"] for e in doc["entities"]] == [
         "floor", "knot", "ball", "metric", "radial", "additive", "door_a", "door_b", "one_way", "inert", "marker",
+        "sun", "lamp",
     ]  # fmt: skip
+    assert doc["entities"][-1]["light"] == {
+        "kind": "point", "color": [1.0, 1.0, 1.0], "intensity": 12.0, "shadows": False, "range": 9.5,
+    }  # fmt: skip
     assert "look_at" not in text  # a point looked at is saved as the rotation it gave
     for e in doc["entities"]:  # angles given as angles stay angles, the rest are quaternions
         given = "euler_deg" if "euler_deg" in e["transform"] else "rotation"
@@ -216,7 +222,14 @@ BAD_ENTITIES = [
     # (entity, field named, words in the message)
     (entity(mesh={"asset": "box", "colour": [1, 0, 0]}), "mesh.colour", "allowed keys: asset, color, checker"),
     (entity(transform={"pos": [0, 0, 0]}), "transform.pos", "allowed keys: position, rotation, euler_deg, scale"),
-    (entity(velocity=1), "velocity", "allowed keys: name, transform, mesh, aberration, portal"),
+    (entity(velocity=1), "velocity", "allowed keys: name, transform, mesh, aberration, portal, light"),
+    (entity(light={"kind": "spot"}), "light.kind", "'sun', 'point'"),
+    (entity(light={"intensity": -1}), "light.intensity", ">= 0"),
+    (entity(light={"color": [2, 0, 0]}), "light.color[0]", "[0, 1]"),
+    (entity(light={"shadows": 1}), "light.shadows", "true or false"),
+    (entity(light={"kind": "sun", "range": 5}), "light.range", "only a point light"),
+    (entity(light={"kind": "point", "range": 0}), "light.range", "> 0"),
+    (entity(light={"kind": "point", "radius": 1}), "light.radius", "allowed keys: kind, color, intensity"),
     (entity(transform={"position": "abc"}), "transform.position", "expected 3 numbers"),
     (entity(transform={"position": [0, "x", 0]}), "transform.position[1]", "expected a number"),
     (entity(transform={"position": [0, None, 0]}), "transform.position[1]", "expected a number"),
@@ -248,6 +261,12 @@ def test_entity_errors_name_file_entity_and_field(tmp_path, bad, field, words):
     assert str(error).startswith(f"{path}: entity 'thing': field '{field}': ")
     assert words in str(error)
     assert (error.entity, error.field) == ("thing", field)
+
+
+def test_more_lights_than_the_kernels_hold_names_the_first_past_the_limit(tmp_path):
+    lamps = [entity(f"lamp{k}", light={"kind": "point"}) for k in range(9)]
+    error = load_error(write(tmp_path, minimal(entities=lamps)))
+    assert (error.entity, error.field) == ("lamp8", "light") and "at most 8" in str(error)
 
 
 def test_target_that_is_not_a_portal(tmp_path):
