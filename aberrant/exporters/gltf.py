@@ -16,6 +16,8 @@ scene, so a level can go to Blender and come back:
   cube [-1/2, 1/2]^3, the quad [-1, 1]^2 facing +Z) in a translucent material
   of the component's colour; the component extra is what marks the node, and
   the importer never turns its mesh into a mesh entity.
+* **Lights** are empty nodes with the extra ``{"aberrant": {"light": {...}}}``
+  (a sun shines along the node's -Z).
 * **The camera** is a node with a perspective camera (``yfov`` from
   ``fov_deg``); its walking speed is the extra ``{"aberrant": {"camera":
   {"speed": s}}}``.
@@ -38,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from aberrant.importers.gltf import unique_name
-from components import Aberration, Camera, Mesh, Portal, Transform
+from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from engine.assets import MeshAsset
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError, shorten
@@ -179,9 +181,10 @@ def gltf_document(scene: Scene) -> tuple[dict[str, Any], bytes]:
         mesh = scene.try_get(entity, Mesh)
         aberration = scene.try_get(entity, Aberration)
         portal = scene.try_get(entity, Portal)
-        if sum(c is not None for c in (mesh, aberration, portal)) > 1:
+        light = scene.try_get(entity, Light)
+        if sum(c is not None for c in (mesh, aberration, portal, light)) > 1:
             raise SceneError(
-                "a glTF node is a mesh, an aberration or a portal, not several", entity=scene.name_of(entity)
+                "a glTF node is a mesh, an aberration, a portal or a light, not several", entity=scene.name_of(entity)
             )
         item: dict[str, Any] = {"name": name, **_trs(transform)}
         if mesh is not None:
@@ -201,6 +204,8 @@ def gltf_document(scene: Scene) -> tuple[dict[str, Any], bytes]:
                 block["target"] = _node_of(scene, names, portal.target)
             item["mesh"] = writer.mesh("portal_quad", _QUAD, _stand_in(portal.color))
             item["extras"] = {"aberrant": {"portal": block}}
+        elif light is not None:
+            item["extras"] = {"aberrant": {"light": _entity_block(saved, scene.name_of(entity))["light"]}}
         writer.node(item)
     extras: dict[str, Any] = {"settings": saved["settings"]}
     if "camera_path" in saved:

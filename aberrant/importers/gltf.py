@@ -232,7 +232,10 @@ class _Importer:
                 )
         if len(block) > 1:
             raise self.gltf.fail(
-                "a node is one of aberration, portal, light or camera, not several", node=name, field="extras"
+                f"a node carries one component (aberration, portal, light or camera), this one {len(block)}: "
+                f"{', '.join(block)}",
+                node=name,
+                field="extras",
             )
         return dict(block)
 
