@@ -22,6 +22,9 @@ class Features:
     portals: bool = False
     aberration_modes: frozenset[str] = frozenset()
     max_events: int = 16
+    #: Some instance samples a texture / shades with vertex normals: without, their code compiles out.
+    textures: bool = False
+    smooth: bool = False
 
     def defines(self) -> dict[str, int]:
         return {
@@ -31,6 +34,8 @@ class Features:
             "HAS_RADIAL": int("radial" in self.aberration_modes),
             "HAS_ADDITIVE": int("additive" in self.aberration_modes),
             "MAX_EVENTS": self.max_events,
+            "HAS_TEXTURES": int(self.textures),
+            "HAS_SMOOTH": int(self.smooth),
         }
 
 

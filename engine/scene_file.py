@@ -66,7 +66,7 @@ CAMERA_KEYS = ("name", "position", "rotation", "look_at", "euler_deg", "fov_deg"
 ASSET_KEYS = ("path", "primitive")
 ENTITY_KEYS = ("name", "transform", "mesh", "aberration", "portal")
 TRANSFORM_KEYS = ("position", "rotation", "euler_deg", "scale")
-MESH_KEYS = ("asset", "color", "checker", "cull_backfaces")
+MESH_KEYS = ("asset", "color", "checker", "cull_backfaces", "texture", "smooth", "crease_deg")
 ABERRATION_KEYS = ("deformation", "mode", "exit", "priority", "debug_draw", "color")
 PORTAL_KEYS = ("target", "color", "debug_draw")
 

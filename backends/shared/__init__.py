@@ -18,6 +18,7 @@ macros a prelude must provide.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from importlib import resources
 from typing import ClassVar
 
@@ -268,4 +269,4 @@ class UploadedScene:
             near = CAMERA_FACE_MARGIN * max(1.0, float(np.linalg.norm(position)))
             if view_reaches(camera, aspect, self._origin, nodes, root) or rows_at(nodes, root, position, near):
                 return features
-        return Features(False, frozenset(), features.max_events)
+        return replace(features, portals=False, aberration_modes=frozenset())

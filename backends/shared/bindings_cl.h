@@ -22,6 +22,8 @@ typedef struct SceneTables {
     __global const TlasNode* tlas_nodes;
     __global const TriangleBlock* triangle_blocks;
     __global const SpaceNode* space_nodes;
+    __global const TriangleNormal* triangle_normals;
+    __global const Texel* texels;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -39,3 +41,5 @@ typedef struct SceneTables {
 #define TLAS_NODE(i) (sc.tlas_nodes[(i)])
 #define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])
 #define SPACE_NODE(i) (sc.space_nodes[(i)])
+#define TRIANGLE_NORMAL(i) (sc.triangle_normals[(i)])
+#define TEXEL(i) (sc.texels[(i)])
