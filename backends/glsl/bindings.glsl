@@ -27,12 +27,6 @@ layout(rgba32ui, binding = 8) readonly restrict uniform uimage2D portals_img;
 layout(rgba32ui, binding = 9) readonly restrict uniform uimage2D tlas_nodes_img;
 layout(rgba32ui, binding = 10) readonly restrict uniform uimage2D triangle_blocks_img;
 layout(rgba32ui, binding = 11) readonly restrict uniform uimage2D space_nodes_img;
-#if HAS_SMOOTH
-layout(rgba32ui, binding = 12) readonly restrict uniform uimage2D triangle_normals_img;
-#endif
-#if HAS_TEXTURES
-layout(rgba32ui, binding = 13) readonly restrict uniform uimage2D texels_img;
-#endif
 layout(rgba32ui, binding = CAMERA_IMAGE) readonly restrict uniform uimage2D camera_img;
 
 #define TEXEL_(img, i) imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2))
@@ -69,15 +63,6 @@ Portal fetch_portal_(int i) { return Portal_from_texels(portals_img, i * PORTALS
 TlasNode fetch_tlas_node_(int i) { return TlasNode_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
 SpaceNode fetch_space_node_(int i) { return SpaceNode_from_texels(space_nodes_img, i * SPACE_NODES_STRIDE); }
 Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
-#if HAS_SMOOTH
-TriangleNormal fetch_triangle_normal_(int i)
-{
-    return TriangleNormal_from_texels(triangle_normals_img, i * TRIANGLE_NORMALS_STRIDE);
-}
-#endif
-#if HAS_TEXTURES
-Texel fetch_texel_(int i) { return Texel_from_texels(texels_img, i * TEXELS_STRIDE); }
-#endif
 
 /* Table access: a record (fetched whole; the compiler drops the loads of unused fields). */
 #define SETTINGS (fetch_settings_())
@@ -91,8 +76,6 @@ Texel fetch_texel_(int i) { return Texel_from_texels(texels_img, i * TEXELS_STRI
 #define TLAS_NODE(i) (fetch_tlas_node_(i))
 #define TRIANGLE_BLOCK(i) (fetch_triangle_block_(i))
 #define SPACE_NODE(i) (fetch_space_node_(i))
-#define TRIANGLE_NORMAL(i) (fetch_triangle_normal_(i))
-#define TEXEL(i) (fetch_texel_(i))
 #define CAMERA_ROW (fetch_camera_())
 
 #else /* storage buffers */
@@ -108,12 +91,6 @@ layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portal
 layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
 layout(std430, binding = 9) readonly restrict buffer TriangleBlockTable { TriangleBlock triangle_blocks_data[]; };
 layout(std430, binding = 10) readonly restrict buffer SpaceNodeTable { SpaceNode space_nodes_data[]; };
-#if HAS_SMOOTH
-layout(std430, binding = 11) readonly restrict buffer TriangleNormalTable { TriangleNormal triangle_normals_data[]; };
-#endif
-#if HAS_TEXTURES
-layout(std430, binding = 12) readonly restrict buffer TexelTable { Texel texels_data[]; };
-#endif
 layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { Camera camera_data[]; };
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
@@ -128,8 +105,25 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define TLAS_NODE(i) (tlas_nodes_data[(i)])
 #define TRIANGLE_BLOCK(i) (triangle_blocks_data[(i)])
 #define SPACE_NODE(i) (space_nodes_data[(i)])
-#define TRIANGLE_NORMAL(i) (triangle_normals_data[(i)])
-#define TEXEL(i) (texels_data[(i)])
 #define CAMERA_ROW (camera_data[0])
 
+#endif
+
+/* Vertex normals and texels live in RGBA32UI images under either store (image unit = table index + 1): with
+ * storage buffers, the other tables, the camera and the AOVs already take the 16 storage blocks a compute
+ * shader may have (GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS on Mesa and NVIDIA). */
+#define SHADING_F4_(img, i) uintBitsToFloat(imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2)))
+#if HAS_SMOOTH
+layout(rgba32ui, binding = 12) readonly restrict uniform uimage2D triangle_normals_img;
+TriangleNormal fetch_triangle_normal_(int i)
+{
+    int b = i * TRIANGLE_NORMALS_STRIDE;
+    return TriangleNormal(SHADING_F4_(triangle_normals_img, b), SHADING_F4_(triangle_normals_img, b + 1),
+                          SHADING_F4_(triangle_normals_img, b + 2));
+}
+#define TRIANGLE_NORMAL(i) (fetch_triangle_normal_(i))
+#endif
+#if HAS_TEXTURES
+layout(rgba32ui, binding = 13) readonly restrict uniform uimage2D texels_img;
+#define TEXEL(i) (Texel(SHADING_F4_(texels_img, (i) * TEXELS_STRIDE)))
 #endif

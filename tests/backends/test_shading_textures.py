@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import require_backend
 from PIL import Image
 from scenes import EVERY, FAST, aim, aimed_pixel
 from test_parity import compare, render
@@ -100,3 +101,20 @@ def test_a_spheres_shading_normal_is_its_position_direction():
     assert np.abs(shading - radial).max() < 1e-5
     assert np.abs(n[hit] - radial).max() > 1e-3  # the facets' own normals are not radial
     backend.release()
+
+
+def test_glsl_storage_buffers_with_every_aov_keep_the_shading_tables_in_images(tmp_path):
+    """Storage buffers for the tables: normals and texels go in images (a compute shader has 16 storage blocks,
+    which the other tables, the camera and the four AOV outputs already fill)."""
+    require_backend("glsl")
+    from backends.glsl.backend import GlslBackend
+
+    scene = textured_quad(tmp_path)
+    scene.add_mesh("ball", "sphere", smooth=True, position=(0.5, 0.0, 0.5), scale=0.3)
+    backend, ref = GlslBackend(tables="ssbo"), ReferenceBackend()
+    try:
+        result = compare(render(backend, scene, (N, N)), render(ref, scene, (N, N)))
+        assert result.mismatch < 2e-3 and result.color_off < 2e-3, result
+    finally:
+        backend.release()
+        ref.release()
