@@ -24,7 +24,7 @@ import numpy as np
 
 from engine.atomic_files import read_regular
 from engine.errors import AberrantError, shorten
-from engine.textures import TextureImage, TextureLibrary, texture_image
+from engine.textures import TextureImage, TextureLibrary, texture_image, warn_unreadable
 
 if TYPE_CHECKING:
     import trimesh
@@ -284,6 +284,8 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
         raise AssetError(f"{path}: holds no triangles")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     image, base_color = _material(loaded, path)
+    if image is None and suffix == ".obj":
+        _warn_missing_map_kd(path, data)
     return make_asset(
         np.asarray(vertices), np.asarray(faces), None if uv is None else np.asarray(uv), str(path),
         normals=_file_normals(path, data, np.asarray(vertices)), image=image, base_color=base_color,
@@ -312,6 +314,22 @@ def _material(loaded: object, path: Path) -> tuple[TextureImage | None, tuple[fl
         except Exception:  # an image trimesh handed over that Pillow cannot convert: the base colour alone
             image = None
     return image, color  # type: ignore[return-value]
+
+
+def _warn_missing_map_kd(path: Path, data: bytes) -> None:
+    """One warning line when an OBJ's material names a ``map_Kd`` image that trimesh could not read."""
+    for line in data.decode("utf-8", "replace").splitlines():
+        if not line.startswith("mtllib "):
+            continue
+        try:
+            mtl = _resolver(path).get(line.split(None, 1)[1].strip()).decode("utf-8", "replace")
+        except Exception:  # no material file: nothing was promised
+            continue
+        for entry in mtl.splitlines():
+            if entry.strip().startswith("map_Kd "):
+                image = entry.split()[-1]
+                warn_unreadable(f"{shorten(path.parent / image)}", f"named by {path.name}'s material, cannot be read")
+                return
 
 
 def _file_normals(path: Path, data: bytes, vertices: np.ndarray) -> np.ndarray | None:

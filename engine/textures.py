@@ -98,8 +98,13 @@ class TextureLibrary:
     def _warn(self, name: str, why: str) -> None:
         if name not in self._warned:
             self._warned.add(name)
-            _log.warning("%s: %s; the mesh is drawn in its base colour", name, why)
+            warn_unreadable(name, why)
         return None
+
+
+def warn_unreadable(name: str, why: str) -> None:
+    """The one warning line of a texture that cannot be used."""
+    _log.warning("%s: %s; the mesh is drawn in its base colour", name, why)
 
 
 def pack_atlas(images: list[tuple[str, TextureImage]], budget_mib: float) -> tuple[np.ndarray, dict[str, int]]:

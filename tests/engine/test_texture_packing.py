@@ -185,3 +185,13 @@ def test_crease_normals_keep_a_cube_flat_and_round_a_sphere():
     radial = sphere.vertices[sphere.faces] / np.linalg.norm(sphere.vertices[sphere.faces], axis=2, keepdims=True)
     assert np.abs(computed - radial).max() < 0.02
     assert np.allclose(corner_normals(sphere.vertices, sphere.faces, 30.0, sphere.normals), radial, atol=1e-6)
+
+
+def test_an_obj_material_naming_a_missing_image_warns_and_keeps_kd(tmp_path, caplog):
+    (tmp_path / "q.mtl").write_text("newmtl paint\nKd 0.2 0.4 0.6\nmap_Kd lost.png\n")
+    (tmp_path / "q.obj").write_text(QUAD_OBJ.format(mtl="q.mtl"))
+    with caplog.at_level(logging.WARNING):
+        asset = AssetLibrary().load(tmp_path / "q.obj")
+    lines = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
+    assert len(lines) == 1 and "lost.png" in lines[0] and "base colour" in lines[0]
+    assert asset.image is None and asset.base_color == pytest.approx((0.2, 0.4, 0.6), abs=1 / 255)
