@@ -333,15 +333,23 @@ def _warn_missing_map_kd(path: Path, data: bytes) -> None:
 
 
 def _file_normals(path: Path, data: bytes, vertices: np.ndarray) -> np.ndarray | None:
-    """An OBJ's ``vn`` normals per loaded vertex (trimesh drops them from a processed-off mesh's cache)."""
-    if path.suffix.lower() != ".obj" or b"\nvn " not in data:
-        return None
+    """An OBJ's ``vn`` or a PLY's ``nx ny nz`` per loaded vertex, read again: trimesh drops them from the
+    cache of a mesh it does not process."""
     import trimesh
 
+    suffix = path.suffix.lower()
     try:
         with _quiet_trimesh():
-            kwargs = trimesh.exchange.obj.load_obj(io.BytesIO(data), resolver=_resolver(path))
-        parts = list(kwargs.get("geometry", {}).values())
+            if suffix == ".obj" and b"\nvn " in data:
+                parts = list(
+                    trimesh.exchange.obj.load_obj(io.BytesIO(data), resolver=_resolver(path))
+                    .get("geometry", {})
+                    .values()
+                )
+            elif suffix == ".ply" and b"property float nx" in data[:4096]:
+                parts = [trimesh.exchange.ply.load_ply(io.BytesIO(data))]
+            else:
+                return None
     except Exception:  # the mesh loaded; only its normals are unusable
         return None
     if len(parts) != 1 or parts[0].get("vertex_normals") is None:

@@ -195,3 +195,16 @@ def test_an_obj_material_naming_a_missing_image_warns_and_keeps_kd(tmp_path, cap
     lines = [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING]
     assert len(lines) == 1 and "lost.png" in lines[0] and "base colour" in lines[0]
     assert asset.image is None and asset.base_color == pytest.approx((0.2, 0.4, 0.6), abs=1 / 255)
+
+
+def test_ply_uvs_and_file_normals_reach_the_asset(tmp_path):
+    header = ["ply", "format ascii 1.0", "element vertex 3"]
+    header += [f"property float {c}" for c in ("x", "y", "z", "nx", "ny", "nz", "s", "t")]
+    header += ["element face 1", "property list uchar int vertex_indices", "end_header"]
+    rows = ["0 0 0 0 0.6 0.8 0 0", "1 0 0 0 0 1 1 0", "0 1 0 0 0 1 0 1", "3 0 1 2"]
+    (tmp_path / "tri.ply").write_text("\n".join(header + rows) + "\n")
+    asset = AssetLibrary().load(tmp_path / "tri.ply")
+    assert asset.uvs is not None and asset.uvs.tolist() == [[0, 0], [1, 0], [0, 1]]
+    assert asset.normals is not None and asset.normals[0] == pytest.approx((0.0, 0.6, 0.8))
+    # smooth shading uses them as they are, no crease applied
+    assert corner_normals(asset.vertices, asset.faces, 30.0, asset.normals)[0, 0] == pytest.approx((0.0, 0.6, 0.8))
