@@ -127,7 +127,8 @@ def make_asset(
     if image is not None:
         h.update(image.content_hash.encode())
     h.update(repr(tuple(base_color)).encode())
-    return MeshAsset(v, f, uv, source, h.hexdigest(), n, image, tuple(float(c) for c in base_color))
+    r, g, b = (float(c) for c in base_color)
+    return MeshAsset(v, f, uv, source, h.hexdigest(), n, image, (r, g, b))
 
 
 # --- primitives ---------------------------------------------------------------
@@ -305,15 +306,16 @@ def _material(loaded: object, path: Path) -> tuple[TextureImage | None, tuple[fl
     if factor is not None:
         f = np.asarray(factor, dtype=np.float64).reshape(-1)
         if f.size >= 3 and np.all(np.isfinite(f[:3])):
-            scale = 255.0 if np.issubdtype(np.asarray(factor).dtype, np.integer) else 1.0
-            color = tuple(float(c) for c in np.clip(f[:3] / scale, 0.0, 1.0))
+            scale = 255.0 if np.issubdtype(np.asarray(factor).dtype, np.integer) else 1.0  # trimesh's uint8 Kd
+            r, g, b = (float(c) for c in np.clip(f[:3] / scale, 0.0, 1.0))
+            color = (r, g, b)
     image = None
     if picture is not None:
         try:
             image = texture_image(np.asarray(picture.convert("RGBA")), f"{shorten(path)} (material)")
         except Exception:  # an image trimesh handed over that Pillow cannot convert: the base colour alone
             image = None
-    return image, color  # type: ignore[return-value]
+    return image, color
 
 
 def _warn_missing_map_kd(path: Path, data: bytes) -> None:

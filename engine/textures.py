@@ -86,11 +86,14 @@ class TextureLibrary:
                 return self._by_stat[key]
             image = decode_image(read_regular(resolved), name)
         except FileNotFoundError:
-            return self._warn(name, "texture file not found")
+            self._warn(name, "texture file not found")
+            return None
         except (OSError, ValueError, RuntimeError) as e:  # unreadable, not an image, a symlink loop
-            return self._warn(name, f"cannot read the texture ({type(e).__name__}: {e})")
+            self._warn(name, f"cannot read the texture ({type(e).__name__}: {e})")
+            return None
         except Exception as e:  # Pillow raises many types on malformed images
-            return self._warn(name, f"cannot decode the texture ({type(e).__name__}: {e})")
+            self._warn(name, f"cannot decode the texture ({type(e).__name__}: {e})")
+            return None
         self._by_stat[key] = image
         self._warned.discard(name)
         return image
@@ -99,7 +102,6 @@ class TextureLibrary:
         if name not in self._warned:
             self._warned.add(name)
             warn_unreadable(name, why)
-        return None
 
 
 def warn_unreadable(name: str, why: str) -> None:

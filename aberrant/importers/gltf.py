@@ -348,7 +348,7 @@ class _Importer:
         where = f"{field}.pbrMetallicRoughness.baseColorTexture"
         source = self.gltf.item("textures", texture, node=name, field=f"{where}.index").get("source")
         spec = self.gltf.item("images", source, node=name, field=f"textures[{texture}].source")
-        file = f"image{source}{_IMAGE_SUFFIXES.get(spec.get('mimeType'), '.png')}"
+        file = f"image{source}{_IMAGE_SUFFIXES.get(str(spec.get('mimeType')), '.png')}"
         if file in self.meshes:
             return file
         uri = spec.get("uri")
