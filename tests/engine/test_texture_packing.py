@@ -208,3 +208,20 @@ def test_ply_uvs_and_file_normals_reach_the_asset(tmp_path):
     assert asset.normals is not None and asset.normals[0] == pytest.approx((0.0, 0.6, 0.8))
     # smooth shading uses them as they are, no crease applied
     assert corner_normals(asset.vertices, asset.faces, 30.0, asset.normals)[0, 0] == pytest.approx((0.0, 0.6, 0.8))
+
+
+def test_a_glb_mesh_assets_pbr_base_colour_and_texture_reach_the_asset(tmp_path):
+    import trimesh
+
+    image = Image.fromarray(np.full((2, 2, 3), (10, 200, 30), np.uint8))
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=image, baseColorFactor=[255, 128, 255, 255])
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    quad = trimesh.Trimesh(
+        np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float), np.array([[0, 1, 2], [0, 2, 3]]),
+        visual=trimesh.visual.TextureVisuals(uv=uv, material=material), process=False,
+    )  # fmt: skip
+    (tmp_path / "q.glb").write_bytes(quad.export(file_type="glb"))
+    asset = AssetLibrary().load(tmp_path / "q.glb")
+    assert asset.uvs is not None and asset.image is not None
+    assert tuple(asset.image.pixels[0, 0]) == (10, 200, 30, 255)
+    assert asset.base_color == pytest.approx((1.0, 0.5, 1.0), abs=1 / 255)
