@@ -7,7 +7,7 @@ that is already running. The camera path is walked once by the real movement and
 pose with :class:`aberrant.flythrough.PoseRenderer`, so the frames are those of a single-process
 run, byte for byte.
 
-What travels: the scene as its scene-file JSON plus the bytes of the mesh files it loads (a worker
+What travels: the scene as its scene-file JSON plus the bytes of the mesh and texture files it loads (a worker
 on another machine has neither this file system nor our GPU state), the poses and the frame size,
 broadcast to every worker once. A worker opens its backend once, in a worker plugin, and keeps it,
 and the scene it last rendered, between tasks.
@@ -37,7 +37,7 @@ import numpy as np
 
 from aberrant.flythrough import PoseRenderer, plan_frames, progress_bar, simulate_path
 from aberrant.sinks import Sink, check_fps, check_gif_memory, check_output
-from components import Transform
+from components import Mesh, Transform
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, BackendUnavailable, shorten
 from engine.scene import Scene
@@ -80,7 +80,7 @@ class FrameJob:
 
 
 def frame_job(scene: Scene, poses: Sequence[Transform], size: Sequence[int]) -> FrameJob:
-    """``scene`` as a scene file plus its mesh files, with the poses to render it from.
+    """``scene`` as a scene file plus its mesh and texture files, with the poses to render it from.
 
     Rotations are written as quaternions (not as the Euler angles a file may have given them
     as), so every value reaches the worker bit for bit.
@@ -102,6 +102,20 @@ def frame_job(scene: Scene, poses: Sequence[Transform], size: Sequence[int]) -> 
         except OSError as e:
             raise AberrantError(f"asset {name!r}: cannot read {shorten(source)} ({e.strerror or e})") from None
         doc["assets"][name] = {"path": local}
+    textures: dict[Path, str] = {}
+    for item in doc["entities"]:
+        mesh = item.get("mesh")
+        if mesh is None or "texture" not in mesh:
+            continue
+        source = scene.texture_path(scene.get(scene.entity(item["name"]), Mesh).texture)
+        if source not in textures:
+            try:
+                data = source.read_bytes()
+            except OSError:
+                continue  # the worker warns of it as this process does, and draws the base colour
+            textures[source] = f"texture{len(textures):03d}-{source.name}"
+            files[textures[source]] = data
+        mesh["texture"] = textures[source]
     text = dumps(doc)
     width, height = (int(c) for c in size)
     digest = hashlib.sha256(text.encode())

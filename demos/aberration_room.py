@@ -60,9 +60,13 @@ def build() -> Scene:
 
     # The same props in each half: what they look like tells the two deformations apart.
     for side, x, color in (("left", 6.4, TEAL), ("right", -6.4, CORAL)):
-        scene.add_mesh(f"{side}_sphere", "sphere", position=(x, 2.6, -5.0), scale=3.2, color=color, checker=0.4)
+        scene.add_mesh(
+            f"{side}_sphere", "sphere", smooth=True, position=(x, 2.6, -5.0), scale=3.2, color=color, checker=0.4
+        )
         block(scene, f"{side}_cube", (x - 1.25, 1.0, 2.0), (x + 1.25, 3.5, 4.5), GOLD, 0.5)
-        scene.add_mesh(f"{side}_column", "cylinder", position=(x, 5.5, 10.0), scale=(1.6, 9.0, 1.6), color=color)
+        scene.add_mesh(
+            f"{side}_column", "cylinder", smooth=True, position=(x, 5.5, 10.0), scale=(1.6, 9.0, 1.6), color=color
+        )
 
     for name, (deformation, centre, size) in ABERRATIONS.items():
         scene.add_aberration(name, deformation, position=centre, scale=size, mode="radial", exit="restore")

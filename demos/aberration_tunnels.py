@@ -89,7 +89,7 @@ def build() -> Scene:
     for i, (name, _, color, _) in enumerate(TUNNELS):
         x = -4.5 + 3.0 * i
         block(scene, f"{name}_post", (x - 0.3, 0.0, 19.0), (x + 0.3, 2.2, 19.6), IVORY)
-        scene.add_mesh(f"{name}_finial", "sphere", position=(x, 2.6, 19.3), scale=0.9, color=color)
+        scene.add_mesh(f"{name}_finial", "sphere", smooth=True, position=(x, 2.6, 19.3), scale=0.9, color=color)
 
     half = 0.5 * WIDTH
     for name, heading, color, deformation in TUNNELS:
@@ -100,7 +100,7 @@ def build() -> Scene:
         # A marker past the far end, on the tunnel's axis: seen through the tunnel, it is deformed too.
         p = along(heading, MOUTH + LENGTH + 4.0)
         block(scene, f"{name}_plinth", (p[0] - 0.5, 0.0, p[2] - 0.5), (p[0] + 0.5, 1.0, p[2] + 0.5), IVORY)
-        scene.add_mesh(f"{name}_marker", "sphere", position=(p[0], 1.6, p[2]), scale=1.2, color=GOLD)
+        scene.add_mesh(f"{name}_marker", "sphere", smooth=True, position=(p[0], 1.6, p[2]), scale=1.2, color=GOLD)
         # The aberration fits the outer hull exactly and turns with the tunnel (metric boxes use their own axes).
         centre = along(heading, MOUTH + 0.5 * LENGTH, 0.5 * (HEIGHT + WALL))
         scene.add_aberration(

@@ -42,7 +42,7 @@ def furniture(scene: Scene) -> None:
         block(scene, name, (kx * lo[0], lo[1], kz * lo[2]), (kx * hi[0], hi[1], kz * hi[2]), color, checker)
 
     def ball(name: str, x: float, y: float, z: float, size: float, color: Color, checker: float = 0.0) -> None:
-        scene.add_mesh(name, "sphere", position=(kx * x, y, kz * z), scale=(kx * size, size, kz * size),
+        scene.add_mesh(name, "sphere", smooth=True, position=(kx * x, y, kz * z), scale=(kx * size, size, kz * size),
                        color=color, checker=checker)  # fmt: skip
 
     squeezed("rug", (-4.0, 0.0, -3.0), (4.0, 0.03, 5.0), CORAL, 0.5)
@@ -54,7 +54,7 @@ def furniture(scene: Scene) -> None:
     squeezed("chest", (-7.6, 0.0, 2.5), (-6.4, 0.7, 4.5), CLAY, 0.35)
     ball("globe", 2.5, 0.5, 2.0, 1.0, GOLD, 0.15)
     for i, (x, z) in enumerate(((-5.0, -4.0), (5.0, -4.0), (-5.0, 3.0), (5.0, 3.0))):
-        scene.add_mesh(f"pillar_{i}", "cylinder", position=(kx * x, 0.5 * HEIGHT, kz * z),
+        scene.add_mesh(f"pillar_{i}", "cylinder", smooth=True, position=(kx * x, 0.5 * HEIGHT, kz * z),
                        scale=(0.8 * kx, HEIGHT, 0.8 * kz), color=IVORY)  # fmt: skip
 
 
@@ -68,8 +68,17 @@ def build() -> Scene:
          checker=0.0, floor_checker=0.25, doors={"south": [DOOR]}, wall_colors={"north": NAVY})  # fmt: skip
     scene.add_mesh("roof", "pyramid", position=(0.0, HEIGHT + WALL + 0.8, 0.0), scale=(5.0, 1.6, 5.0), color=CLAY)
     furniture(scene)
-    scene.add_mesh("tree_trunk", "cylinder", position=(-4.2, 1.0, 1.2), scale=(0.45, 2.5, 0.45), color=(0.45, 0.3, 0.2))
-    scene.add_mesh("tree_crown", "sphere", position=(-4.2, 3.0, 1.2), scale=2.4, color=(0.2, 0.5, 0.25), checker=0.5)
+    scene.add_mesh(
+        "tree_trunk",
+        "cylinder",
+        smooth=True,
+        position=(-4.2, 1.0, 1.2),
+        scale=(0.45, 2.5, 0.45),
+        color=(0.45, 0.3, 0.2),
+    )
+    scene.add_mesh(
+        "tree_crown", "sphere", smooth=True, position=(-4.2, 3.0, 1.2), scale=2.4, color=(0.2, 0.5, 0.25), checker=0.5
+    )
     # The box is the hut's hull: its faces are flush with the outer faces of walls, floor and ceiling.
     scene.add_aberration(
         "inside",

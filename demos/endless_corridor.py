@@ -60,7 +60,7 @@ def build() -> Scene:
         block(scene, f"lamp_{i}", (-0.3, h - 0.12, z + 2.7), (0.3, h, z + 3.3), GOLD)
     # The one landmark of the stretch: a globe on a pedestal, to count the repeats by.
     block(scene, "pedestal", (w - 1.0, 0.0, -0.4), (w - 0.2, 1.0, 0.4), IVORY)
-    scene.add_mesh("globe", "sphere", position=(w - 0.6, 1.35, 0.0), scale=0.7, color=GOLD, checker=0.15)
+    scene.add_mesh("globe", "sphere", smooth=True, position=(w - 0.6, 1.35, 0.0), scale=0.7, color=GOLD, checker=0.15)
 
     # The open ends: leaving by one is arriving by the other.
     end = {"scale": (w, 0.5 * h, 1.0)}

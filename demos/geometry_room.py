@@ -57,11 +57,21 @@ def warm_room(scene: Scene) -> None:
     block(scene, "warm_partition", (-6.0, 0.0, -0.2), (-GAP, HEIGHT, 0.2), CLAY, 1.2)
     block(scene, "warm_column", (GAP, 0.0, -0.5), (GAP + 1.0, HEIGHT, 0.5), CLAY, 1.2)
     # The back of the room, seen beside the column (and, from the hall, through the gap).
-    scene.add_mesh("warm_plinth", "cylinder", position=(-3.2, 0.45, -3.2), scale=(1.6, 0.9, 1.6), color=IVORY)
-    scene.add_mesh("warm_knot", "knot", position=(-3.2, 1.75, -3.2), euler_deg=(90.0, 20.0, 0.0), scale=2.0, color=GOLD)
+    scene.add_mesh(
+        "warm_plinth", "cylinder", smooth=True, position=(-3.2, 0.45, -3.2), scale=(1.6, 0.9, 1.6), color=IVORY
+    )
+    scene.add_mesh(
+        "warm_knot",
+        "knot",
+        smooth=True,
+        position=(-3.2, 1.75, -3.2),
+        euler_deg=(90.0, 20.0, 0.0),
+        scale=2.0,
+        color=GOLD,
+    )
     block(scene, "warm_crate", (3.0, 0.0, -5.0), (4.6, 1.6, -3.4), CORAL, 0.4)
     block(scene, "warm_crate_top", (3.4, 1.6, -4.6), (4.2, 2.4, -3.8), GOLD, 0.4)
-    scene.add_mesh("warm_ball", "sphere", position=(-4.2, 0.6, 3.8), scale=1.2, color=CORAL, checker=0.3)
+    scene.add_mesh("warm_ball", "sphere", smooth=True, position=(-4.2, 0.6, 3.8), scale=1.2, color=CORAL, checker=0.3)
 
 
 def octagon_hall(scene: Scene) -> None:
@@ -78,17 +88,19 @@ def octagon_hall(scene: Scene) -> None:
             color=TEAL if k % 2 else SKY, checker=0.6,
         )  # fmt: skip
     block(scene, "hall_partition", (HALL - apothem, 0.0, -0.2), (HALL - GAP, HEIGHT, 0.2), SKY, 0.6)
-    scene.add_mesh("hall_column", "cylinder", position=(HALL + GAP + 0.5, 0.5 * HEIGHT, 0.0),
+    scene.add_mesh("hall_column", "cylinder", smooth=True, position=(HALL + GAP + 0.5, 0.5 * HEIGHT, 0.0),
                    scale=(1.0, HEIGHT, 1.0), color=SKY)  # fmt: skip
     # Pyramids and spheres about the room, clear of the walk through the gap and round the column.
     for k, (dx, dz) in enumerate(((-1.8, -4.4), (3.4, -3.8), (-4.6, -2.6), (-4.2, 3.6), (4.4, 4.4))):
         if k % 2:
             scene.add_mesh(f"hall_sphere_{k}", "sphere", position=(HALL + dx, 0.7, dz), scale=1.4, color=GOLD,
-                           checker=0.25)  # fmt: skip
+                           smooth=True, checker=0.25)  # fmt: skip
         else:
             scene.add_mesh(f"hall_pyramid_{k}", "pyramid", position=(HALL + dx, 0.8, dz),
                            euler_deg=(0.0, 20.0 * k, 0.0), scale=1.6, color=CORAL)  # fmt: skip
-    scene.add_mesh("hall_dais", "cylinder", position=(HALL + 0.6, 0.2, 4.8), scale=(2.4, 0.4, 2.4), color=IVORY)
+    scene.add_mesh(
+        "hall_dais", "cylinder", smooth=True, position=(HALL + 0.6, 0.2, 4.8), scale=(2.4, 0.4, 2.4), color=IVORY
+    )
 
 
 def build() -> Scene:

@@ -138,7 +138,7 @@ def furnish(scene: Scene, prefix: str, box: Box, door_wall: str, theme: str, acc
 
     def ball(name: str, u: float, height: float, z: float, size: float, color: Color, checker: float = 0.0) -> None:
         scene.add_mesh(f"{prefix}_{name}", "sphere", position=(x(u), y + height, z), scale=size, color=color,
-                       checker=checker)  # fmt: skip
+                       smooth=True, checker=checker)  # fmt: skip
 
     far = width
     if theme == "bedroom":
@@ -162,7 +162,7 @@ def furnish(scene: Scene, prefix: str, box: Box, door_wall: str, theme: str, acc
         for i in range(3):
             u, z = float(rng.uniform(0.5 * far, far - 1.0)), float(rng.uniform(z0 + 1.0, z1 - 1.0))
             scene.add_mesh(f"{prefix}_trunk_{i}", "cylinder", position=(x(u), y + 0.8, z), scale=(0.3, 1.6, 0.3),
-                           color=(0.45, 0.3, 0.2))  # fmt: skip
+                           smooth=True, color=(0.45, 0.3, 0.2))  # fmt: skip
             ball(f"crown_{i}", u, 2.0, z, 1.4, accent)
     elif theme == "dining":
         piece("table", (0.5 * far - 0.5, 0.5 * far + 1.3), (0.7, 0.8), (z0 + 1.5, z1 - 1.5), IVORY)
@@ -179,7 +179,7 @@ def furnish(scene: Scene, prefix: str, box: Box, door_wall: str, theme: str, acc
     else:  # columns
         for i in range(4):
             u, z = (0.4 if i % 2 else 0.75) * far, zm + (2.0 if i // 2 else -2.0)
-            scene.add_mesh(f"{prefix}_column_{i}", "cylinder", position=(x(u), 0.5 * (y + top), z),
+            scene.add_mesh(f"{prefix}_column_{i}", "cylinder", smooth=True, position=(x(u), 0.5 * (y + top), z),
                            scale=(0.6, top - y, 0.6), color=accent)  # fmt: skip
 
 
@@ -191,7 +191,7 @@ def suite_furniture(scene: Scene, box: Box) -> None:
     block(scene, "suite_sofa", (x1 - 1.0, y, zm - 2.0), (x1 - 0.1, y + 0.8, zm + 2.0), TEAL)
     for i, z in enumerate((z0 + 1.0, z1 - 2.0)):
         block(scene, f"suite_chair_{i}", (x0 + 4.0, y, z), (x0 + 5.0, y + 0.9, z + 1.0), CORAL)
-    scene.add_mesh("suite_lamp", "sphere", position=(x1 - 0.6, y + 1.4, z0 + 0.6), scale=0.6, color=GOLD)
+    scene.add_mesh("suite_lamp", "sphere", smooth=True, position=(x1 - 0.6, y + 1.4, z0 + 0.6), scale=0.6, color=GOLD)
 
 
 def rooms(scene: Scene) -> None:
@@ -236,10 +236,10 @@ def ballroom(scene: Scene) -> None:
         x = -8.0 + 4.0 * i
         for side, z in (("north", -5.0), ("south", 5.0)):
             scene.add_mesh(f"ballroom_column_{side}_{i}", "cylinder", position=(x, lo[1] + 0.5 * height, z),
-                           scale=(0.9, height, 0.9), color=IVORY)  # fmt: skip
+                           smooth=True, scale=(0.9, height, 0.9), color=IVORY)  # fmt: skip
     for i in range(3):
         scene.add_mesh(f"ballroom_chandelier_{i}", "sphere", position=(-6.0 + 6.0 * i, hi[1] - 1.5, 0.0), scale=1.6,
-                       color=GOLD, checker=0.2)  # fmt: skip
+                       smooth=True, color=GOLD, checker=0.2)  # fmt: skip
     block(scene, "ballroom_stage", (lo[0], lo[1], lo[2]), (hi[0], lo[1] + 0.8, lo[2] + 4.0), PURPLE, 0.5)
     block(scene, "ballroom_rug", (lo[0] + 2.0, lo[1], -2.5), (hi[0] - 2.0, lo[1] + 0.03, 2.5), RED, 0.5)
 

@@ -74,12 +74,25 @@ def cottage(scene: Scene) -> None:
         z = 4.0 + 1.5 * i
         block(scene, f"stone_{i}", (-0.6, -0.3, z), (0.6, -0.22, z + 1.0), SLATE)
     # Behind the cottage, where the hall's east door lets out: a pond and more trees.
-    scene.add_mesh("pond", "cylinder", position=(1.0, -0.28, -17.0), scale=(6.0, 0.1, 4.0), color=(0.25, 0.5, 0.75))
-    scene.add_mesh("pond_rim", "cylinder", position=(1.0, -0.3, -17.0), scale=(6.8, 0.12, 4.8), color=SLATE)
+    scene.add_mesh(
+        "pond", "cylinder", smooth=True, position=(1.0, -0.28, -17.0), scale=(6.0, 0.1, 4.0), color=(0.25, 0.5, 0.75)
+    )
+    scene.add_mesh(
+        "pond_rim", "cylinder", smooth=True, position=(1.0, -0.3, -17.0), scale=(6.8, 0.12, 4.8), color=SLATE
+    )
     for name, x, z in (("tree_east", 7.0, -2.0), ("tree_west", -7.5, 3.0), ("tree_north", -5.0, -19.0),
                        ("tree_far", 8.0, -22.0)):  # fmt: skip
-        scene.add_mesh(f"{name}_trunk", "cylinder", position=(x, 1.0, z), scale=(0.5, 2.6, 0.5), color=(0.45, 0.3, 0.2))
-        scene.add_mesh(f"{name}_crown", "sphere", position=(x, 3.2, z), scale=2.8, color=(0.2, 0.5, 0.25), checker=0.5)
+        scene.add_mesh(
+            f"{name}_trunk",
+            "cylinder",
+            smooth=True,
+            position=(x, 1.0, z),
+            scale=(0.5, 2.6, 0.5),
+            color=(0.45, 0.3, 0.2),
+        )
+        scene.add_mesh(
+            f"{name}_crown", "sphere", smooth=True, position=(x, 3.2, z), scale=2.8, color=(0.2, 0.5, 0.25), checker=0.5
+        )
 
 
 def hall(scene: Scene) -> None:
@@ -90,10 +103,17 @@ def hall(scene: Scene) -> None:
          wall_colors={"north": CORAL})  # fmt: skip
     for i, (x, z) in enumerate(((-3.5, -3.5), (3.5, -3.5), (-3.5, -10.5), (3.5, -10.5))):
         scene.add_mesh(
-            f"hall_column_{i}", "cylinder", position=(x, lo[1] + 2.25, z), scale=(0.9, 4.5, 0.9), color=IVORY
+            f"hall_column_{i}",
+            "cylinder",
+            smooth=True,
+            position=(x, lo[1] + 2.25, z),
+            scale=(0.9, 4.5, 0.9),
+            color=IVORY,
         )
     block(scene, "hall_rug", (-2.0, lo[1], -9.5), (2.0, lo[1] + 0.04, -4.5), PURPLE, 0.5)
-    scene.add_mesh("hall_globe", "sphere", position=(-4.6, lo[1] + 0.9, -7.0), scale=1.4, color=GOLD, checker=0.3)
+    scene.add_mesh(
+        "hall_globe", "sphere", smooth=True, position=(-4.6, lo[1] + 0.9, -7.0), scale=1.4, color=GOLD, checker=0.3
+    )
 
 
 def gallery(scene: Scene) -> None:
@@ -124,7 +144,9 @@ def bedroom(scene: Scene) -> None:
     block(scene, "bed", (lo[0], lo[1], lo[2]), (lo[0] + 2.2, lo[1] + 0.6, lo[2] + 3.2), IVORY)
     block(scene, "pillow", (lo[0] + 0.2, lo[1] + 0.6, lo[2] + 0.2), (lo[0] + 2.0, lo[1] + 0.8, lo[2] + 0.8), SKY)
     block(scene, "table", (lo[0] + 2.5, lo[1], lo[2]), (lo[0] + 3.3, lo[1] + 0.7, lo[2] + 0.8), CLAY)
-    scene.add_mesh("lamp", "sphere", position=(lo[0] + 2.9, lo[1] + 1.0, lo[2] + 0.4), scale=0.6, color=GOLD)
+    scene.add_mesh(
+        "lamp", "sphere", smooth=True, position=(lo[0] + 2.9, lo[1] + 1.0, lo[2] + 0.4), scale=0.6, color=GOLD
+    )
 
 
 def build() -> Scene:

@@ -55,9 +55,14 @@ def build() -> Scene:
         z = 2.0 - 2.0 * i
         for side, x in (("w", -ROWS_X), ("e", ROWS_X)):
             scene.add_mesh(
-                f"pillar_{side}{i:02d}", "cylinder", position=(x, 1.2, z), scale=(0.6, 2.4, 0.6), color=IVORY
+                f"pillar_{side}{i:02d}",
+                "cylinder",
+                smooth=True,
+                position=(x, 1.2, z),
+                scale=(0.6, 2.4, 0.6),
+                color=IVORY,
             )
-            scene.add_mesh(f"ball_{side}{i:02d}", "sphere", position=(x, 2.75, z), scale=0.7, color=GOLD)
+            scene.add_mesh(f"ball_{side}{i:02d}", "sphere", smooth=True, position=(x, 2.75, z), scale=0.7, color=GOLD)
     block(scene, "runner", (-0.8, 0.0, -46.0), (0.8, 0.02, 9.0), SLATE)
     for k, (z0, z1, color) in enumerate(ACTIVE):
         block(scene, f"runner_{k}", (-0.8, 0.02, z0), (0.8, 0.04, z1), color)

@@ -78,7 +78,7 @@ def build() -> Scene:
     room(scene, "atrium", (-5.0, 0.0, -6.0), (5.0, 3.6, 6.0), wall=CHALK, floor=SAND, ceiling=IVORY,
          checker=0.0, floor_checker=0.6, wall_colors={"west": CORAL, "east": (0.55, 0.78, 0.8)})  # fmt: skip
     first = frame(scene, "atrium_frame", 0.0, 0.0, -1.0, CLAY)
-    scene.add_mesh("atrium_urn", "sphere", position=(-3.4, 0.6, 3.4), scale=1.2, color=CORAL, checker=0.25)
+    scene.add_mesh("atrium_urn", "sphere", smooth=True, position=(-3.4, 0.6, 3.4), scale=1.2, color=CORAL, checker=0.25)
     scene.add_mesh("atrium_cone", "pyramid", position=(3.4, 0.6, -4.0), scale=1.2, color=TEAL)
 
     # 2. The hall: green walls, two rows of pillars, a frame at each end; the box fills it, walls included.
@@ -90,7 +90,12 @@ def build() -> Scene:
         z = -1.5 - 3.0 * i
         for side, dx in (("w", -3.0), ("e", 3.0)):
             scene.add_mesh(
-                f"hall_pillar_{side}{i}", "cylinder", position=(HALL_X + dx, 2.0, z), scale=(0.8, 4.0, 0.8), color=IVORY
+                f"hall_pillar_{side}{i}",
+                "cylinder",
+                smooth=True,
+                position=(HALL_X + dx, 2.0, z),
+                scale=(0.8, 4.0, 0.8),
+                color=IVORY,
             )
     scene.add_aberration(
         "hall_squeeze", SQUEEZE, position=(HALL_X, 2.0, -5.0), scale=(10.6, 4.6, 18.6), mode="metric", color=GREEN
@@ -105,14 +110,27 @@ def build() -> Scene:
                          ("hedge_s", (-12.0, g, 5.0), (12.0, g + 2.4, 6.0))):  # fmt: skip
         block(scene, name, lo, hi, (0.16, 0.40, 0.2), 0.5)
     gate = frame(scene, "garden_gate", 0.0, g, 0.0, ROSE)
-    scene.add_mesh("fountain_basin", "cylinder", position=(0.0, g + 0.3, -8.0), scale=(4.0, 0.6, 4.0), color=CHALK)
-    scene.add_mesh("fountain_column", "cylinder", position=(0.0, g + 1.2, -8.0), scale=(0.6, 1.8, 0.6), color=CHALK)
-    scene.add_mesh("fountain_globe", "sphere", position=(0.0, g + 2.5, -8.0), scale=1.0, color=GOLD, checker=0.2)
+    scene.add_mesh(
+        "fountain_basin", "cylinder", smooth=True, position=(0.0, g + 0.3, -8.0), scale=(4.0, 0.6, 4.0), color=CHALK
+    )
+    scene.add_mesh(
+        "fountain_column", "cylinder", smooth=True, position=(0.0, g + 1.2, -8.0), scale=(0.6, 1.8, 0.6), color=CHALK
+    )
+    scene.add_mesh(
+        "fountain_globe", "sphere", smooth=True, position=(0.0, g + 2.5, -8.0), scale=1.0, color=GOLD, checker=0.2
+    )
     for name, x, z in (("tree_w", -6.5, -10.0), ("tree_e", 6.5, -6.0)):
         scene.add_mesh(
-            f"{name}_trunk", "cylinder", position=(x, g + 1.2, z), scale=(0.5, 2.4, 0.5), color=(0.45, 0.3, 0.2)
+            f"{name}_trunk",
+            "cylinder",
+            smooth=True,
+            position=(x, g + 1.2, z),
+            scale=(0.5, 2.4, 0.5),
+            color=(0.45, 0.3, 0.2),
         )
-        scene.add_mesh(f"{name}_crown", "sphere", position=(x, g + 3.2, z), scale=3.0, color=PURPLE, checker=0.5)
+        scene.add_mesh(
+            f"{name}_crown", "sphere", smooth=True, position=(x, g + 3.2, z), scale=3.0, color=PURPLE, checker=0.5
+        )
 
     # The portals face +z (towards the approach): walking through one walks on out of its partner.
     scene.add_portal_pair("atrium_door", "hall_door", a=first, b=near, color=GOLD)

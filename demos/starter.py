@@ -2,7 +2,7 @@
 
 The first scene to render: plain Euclidean space (no aberrations, no
 portals), so it exercises meshes, instancing, an imported OBJ file, the
-checker material and the lighting, and gives a known-good picture to compare
+checker material, textures, smooth shading and the lighting, and gives a known-good picture to compare
 the backends on.
 """
 
@@ -16,8 +16,11 @@ from engine.settings import Settings
 #: Place in the demo gallery (``aberrant demos``); see demos/__init__.py.
 ORDER = 0
 
-#: The imported mesh, found beside this module so the demo works from any working directory.
+#: The imported mesh and the textures (demos/assets/make_textures.py), found beside this module so the demo
+#: works from any working directory.
 KNOT_PATH = Path(__file__).resolve().parent / "assets" / "knot.obj"
+PLANKS_PATH = Path(__file__).resolve().parent / "assets" / "planks.png"
+TILES_PATH = Path(__file__).resolve().parent / "assets" / "tiles.png"
 
 # A warm, slightly desaturated palette that reads well under one light.
 PLASTER = (0.90, 0.85, 0.76)
@@ -46,20 +49,26 @@ def build() -> Scene:
     scene.add_mesh("right_wall", "box", position=(5.1, 2.25, 0.0), scale=(0.2, 4.5, 10.4), color=SAGE)
 
     # The centrepiece: the knot standing on a round plinth.
-    scene.add_mesh("plinth", "cylinder", position=(0.0, 0.4, -1.6), scale=(1.4, 0.8, 1.4), color=BONE)
-    scene.add_mesh("knot", "knot", position=(0.0, 1.72, -1.6), euler_deg=(90.0, 35.0, 0.0), scale=2.0, color=GOLD)
+    scene.add_mesh("plinth", "cylinder", smooth=True, position=(0.0, 0.4, -1.6), scale=(1.4, 0.8, 1.4), color=BONE)
+    scene.add_mesh(
+        "knot", "knot", smooth=True, position=(0.0, 1.72, -1.6), euler_deg=(90.0, 35.0, 0.0), scale=2.0, color=GOLD
+    )
 
     # Blocks of different sizes and turns around it: a stack on the right, a column and a ball on the left.
-    scene.add_mesh("crate", "box", position=(2.9, 0.7, -2.8), euler_deg=(0.0, 28.0, 0.0), scale=1.4, color=TERRACOTTA)
+    scene.add_mesh(
+        "crate", "box", position=(2.9, 0.7, -2.8), euler_deg=(0.0, 28.0, 0.0), scale=1.4, texture=str(PLANKS_PATH),
+        color=(1.0, 1.0, 1.0),
+    )  # fmt: skip
     scene.add_mesh("cube", "box", position=(2.8, 1.75, -2.7), euler_deg=(0.0, -14.0, 0.0), scale=0.7, color=MUSTARD)
     scene.add_mesh(
         "pillar", "box", position=(-3.2, 1.6, -3.6), euler_deg=(0.0, 38.0, 0.0), scale=(0.9, 3.2, 0.9), color=INDIGO
     )
-    scene.add_mesh("ball", "sphere", position=(-2.4, 0.55, 0.2), scale=1.1, color=TERRACOTTA)
+    scene.add_mesh("ball", "sphere", smooth=True, position=(-2.4, 0.55, 0.2), scale=1.1, color=TERRACOTTA)
     scene.add_mesh("tilted", "box", position=(-1.9, 0.33, -2.4), euler_deg=(0.0, 25.0, 38.0), scale=0.55, color=TEAL)
     scene.add_mesh(
-        "slab", "box", position=(2.2, 0.2, 0.6), euler_deg=(0.0, -20.0, 0.0), scale=(1.6, 0.4, 1.0), color=TEAL
-    )
+        "slab", "box", position=(2.2, 0.2, 0.6), euler_deg=(0.0, -20.0, 0.0), scale=(1.6, 0.4, 1.0),
+        texture=str(TILES_PATH), color=(1.0, 1.0, 1.0),
+    )  # fmt: skip
     scene.add_mesh(
         "pyramid", "pyramid", position=(0.9, 0.35, 1.6), euler_deg=(0.0, 15.0, 0.0), scale=0.7, color=MUSTARD
     )

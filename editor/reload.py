@@ -1,4 +1,4 @@
-"""Hot reload: watch a level's file and the mesh files its scene loads, and rebuild the scene when one changes.
+"""Hot reload: watch a level's file and the mesh and texture files it loads; rebuild the scene when one changes.
 
 Display-free so tests drive it on temporary files: :meth:`LevelWatcher.poll`
 looks at the files' modification times and sizes at most once every
@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from components import Transform
+from components import Mesh, Transform
 from engine.errors import AberrantError
 from engine.scene import Scene
 from engine.scene_file import load_scene
@@ -42,8 +42,10 @@ def stamp(path: Path) -> Stamp:
 
 
 def mesh_files(scene: Scene) -> list[Path]:
-    """The files ``scene``'s assets load (primitives have none)."""
-    return [scene.asset_path(spec) for spec in scene.assets.values() if spec.path is not None]
+    """The files ``scene``'s assets and mesh textures load (primitives have none), each once."""
+    files = [scene.asset_path(spec) for spec in scene.assets.values() if spec.path is not None]
+    files += [scene.texture_path(mesh.texture) for _, mesh in scene.query(Mesh) if mesh.texture]
+    return list(dict.fromkeys(files))
 
 
 def keep_camera(old: Scene, new: Scene) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import codecs
 import contextlib
 import hashlib
+import io
 import logging
 import math
 import os
@@ -23,6 +24,7 @@ import numpy as np
 
 from engine.atomic_files import read_regular
 from engine.errors import AberrantError, shorten
+from engine.textures import TextureImage, TextureLibrary, texture_image, warn_unreadable
 
 if TYPE_CHECKING:
     import trimesh
@@ -37,13 +39,21 @@ class AssetError(AberrantError, ValueError):
 
 @dataclass(frozen=True, eq=False)
 class MeshAsset:
-    """Object-space triangles: float32 vertices (N, 3), int32 faces (M, 3), optional float32 UVs (N, 2)."""
+    """Object-space triangles: float32 vertices (N, 3), int32 faces (M, 3), optional float32 UVs (N, 2).
+
+    ``normals`` are the file's unit vertex normals (N, 3), if it has them; ``image`` and ``base_color`` its
+    material's colour texture and colour (OBJ ``.mtl`` ``map_Kd``/``Kd``, glTF ``baseColor``), which a
+    mesh's own colour multiplies.
+    """
 
     vertices: np.ndarray
     faces: np.ndarray
     uvs: np.ndarray | None
     source: str
     content_hash: str = field(default="")
+    normals: np.ndarray | None = None
+    image: TextureImage | None = None
+    base_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     @property
     def triangle_count(self) -> int:
@@ -53,7 +63,16 @@ class MeshAsset:
         return self.vertices.min(axis=0), self.vertices.max(axis=0)
 
 
-def make_asset(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, source: str) -> MeshAsset:
+def make_asset(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    uvs: np.ndarray | None,
+    source: str,
+    *,
+    normals: np.ndarray | None = None,
+    image: TextureImage | None = None,
+    base_color: tuple[float, float, float] = (1.0, 1.0, 1.0),
+) -> MeshAsset:
     """Validate and freeze geometry; the content hash identifies it everywhere (BVH cache, packing).
 
     Whatever a file parser hands over (odd shapes, float or huge indices,
@@ -92,12 +111,24 @@ def make_asset(vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None, 
             uv = None
         if uv is not None and (len(uv) != len(v) or not np.all(np.isfinite(uv))):
             uv = None  # unusable UVs: fall back to triplanar texturing rather than failing the load
+    n = None
+    if normals is not None:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            n = np.asarray(normals, dtype=np.float64).reshape(-1, 3) if np.size(normals) == v.size else None
+            if n is not None:
+                n = (n / np.linalg.norm(n, axis=1, keepdims=True)).astype(np.float32)
+        if n is not None and not np.all(np.isfinite(n)):
+            n = None  # unusable normals: computed from the faces instead
     h = hashlib.sha256()
-    for a in (v, f) + ((uv,) if uv is not None else ()):
+    arrays = tuple(a for a in (v, f, uv, n) if a is not None)
+    for a in arrays:
         h.update(a.tobytes())
-    for a in (v, f) + ((uv,) if uv is not None else ()):
         a.setflags(write=False)
-    return MeshAsset(v, f, uv, source, h.hexdigest())
+    if image is not None:
+        h.update(image.content_hash.encode())
+    h.update(repr(tuple(base_color)).encode())
+    r, g, b = (float(c) for c in base_color)
+    return MeshAsset(v, f, uv, source, h.hexdigest(), n, image, (r, g, b))
 
 
 # --- primitives ---------------------------------------------------------------
@@ -143,7 +174,7 @@ def _sphere(subdivisions: int = 3) -> MeshAsset:
     import trimesh
 
     m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.5)
-    return make_asset(m.vertices, m.faces, None, "primitive:sphere")
+    return make_asset(m.vertices, m.faces, None, "primitive:sphere", normals=m.vertices)
 
 
 def _pyramid() -> MeshAsset:
@@ -185,6 +216,8 @@ class AssetLibrary:
         self._primitives: dict[str, MeshAsset] = {}
         self._by_stat: dict[tuple[str, int, int], MeshAsset] = {}
         self._by_content: dict[str, MeshAsset] = {}
+        #: The image files meshes name as textures, read once like the meshes.
+        self.textures = TextureLibrary()
 
     def primitive(self, name: str) -> MeshAsset:
         if name not in _PRIMITIVE_BUILDERS:
@@ -236,7 +269,6 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
             data = as_utf8(data)
         except UnicodeError as e:
             raise AssetError(f"{path}: cannot decode the text ({e})") from None
-    import io
 
     import trimesh
 
@@ -252,7 +284,81 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
     if faces is None or vertices is None or len(faces) == 0:
         raise AssetError(f"{path}: holds no triangles")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
-    return make_asset(np.asarray(vertices), np.asarray(faces), None if uv is None else np.asarray(uv), str(path))
+    image, base_color = _material(loaded, path)
+    if image is None and suffix == ".obj":
+        _warn_missing_map_kd(path, data)
+    return make_asset(
+        np.asarray(vertices), np.asarray(faces), None if uv is None else np.asarray(uv), str(path),
+        normals=_file_normals(path, data, np.asarray(vertices)), image=image, base_color=base_color,
+    )  # fmt: skip
+
+
+def _material(loaded: object, path: Path) -> tuple[TextureImage | None, tuple[float, float, float]]:
+    """The colour texture and colour of a loaded mesh's material (SimpleMaterial from ``.mtl``, PBR from glTF)."""
+    material = getattr(getattr(loaded, "visual", None), "material", None)
+    if material is None:
+        return None, (1.0, 1.0, 1.0)
+    picture = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    factor = getattr(material, "baseColorFactor", None)
+    if factor is None:
+        factor = getattr(material, "diffuse", None)
+    color = (1.0, 1.0, 1.0)
+    if factor is not None:
+        f = np.asarray(factor, dtype=np.float64).reshape(-1)
+        if f.size >= 3 and np.all(np.isfinite(f[:3])):
+            scale = 255.0 if np.issubdtype(np.asarray(factor).dtype, np.integer) else 1.0  # trimesh's uint8 Kd
+            r, g, b = (float(c) for c in np.clip(f[:3] / scale, 0.0, 1.0))
+            color = (r, g, b)
+    image = None
+    if picture is not None:
+        try:
+            image = texture_image(np.asarray(picture.convert("RGBA")), f"{shorten(path)} (material)")
+        except Exception:  # an image trimesh handed over that Pillow cannot convert: the base colour alone
+            image = None
+    return image, color
+
+
+def _warn_missing_map_kd(path: Path, data: bytes) -> None:
+    """One warning line when an OBJ's material names a ``map_Kd`` image that trimesh could not read."""
+    for line in data.decode("utf-8", "replace").splitlines():
+        if not line.startswith("mtllib "):
+            continue
+        try:
+            mtl = _resolver(path).get(line.split(None, 1)[1].strip()).decode("utf-8", "replace")
+        except Exception:  # no material file: nothing was promised
+            continue
+        for entry in mtl.splitlines():
+            if entry.strip().startswith("map_Kd "):
+                image = entry.split()[-1]
+                warn_unreadable(f"{shorten(path.parent / image)}", f"named by {path.name}'s material, cannot be read")
+                return
+
+
+def _file_normals(path: Path, data: bytes, vertices: np.ndarray) -> np.ndarray | None:
+    """An OBJ's ``vn`` or a PLY's ``nx ny nz`` per loaded vertex, read again: trimesh drops them from the
+    cache of a mesh it does not process."""
+    import trimesh
+
+    suffix = path.suffix.lower()
+    try:
+        with _quiet_trimesh():
+            if suffix == ".obj" and b"\nvn " in data:
+                parts = list(
+                    trimesh.exchange.obj.load_obj(io.BytesIO(data), resolver=_resolver(path))
+                    .get("geometry", {})
+                    .values()
+                )
+            elif suffix == ".ply" and b"property float nx" in data[:4096]:
+                parts = [trimesh.exchange.ply.load_ply(io.BytesIO(data))]
+            else:
+                return None
+    except Exception:  # the mesh loaded; only its normals are unusable
+        return None
+    if len(parts) != 1 or parts[0].get("vertex_normals") is None:
+        return None
+    normals = np.asarray(parts[0]["vertex_normals"])
+    same = np.shape(parts[0]["vertices"]) == vertices.shape and np.allclose(parts[0]["vertices"], vertices)
+    return normals if same and normals.shape == vertices.shape else None
 
 
 @contextlib.contextmanager

@@ -13,7 +13,8 @@ the std430 rules, and that the written structs read the dtypes' bytes.
 Two families exist:
 
 * precision-independent tables (``triangles``, ``triangle_uvs``,
-  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``, ``space_nodes``):
+  ``bvh_nodes``, ``materials``, ``settings``, ``tlas_nodes``, ``triangle_blocks``, ``space_nodes``,
+  ``triangle_normals``, ``texels``):
   always 32-bit. Vertices are float32 in the assets, so a float64 tracer loses nothing
   by reading them as float32; BVH bounds are rounded outward so any precision
   may traverse them. ``bvh_nodes`` has one of four dtypes, chosen by the
@@ -127,6 +128,16 @@ TRIANGLE_DTYPE = TRIANGLE.dtype()
 TRIANGLE_UV = Record("TriangleUv", _vectors("float4", "uv01", "uv2"))
 TRIANGLE_UV_DTYPE = TRIANGLE_UV.dtype()
 
+#: Object-space vertex normals of a triangle (``w`` unused), for smooth shading: packed only for the assets
+#: a smooth mesh uses, row ``triangle + material.texture.w`` (``engine.normals``).
+TRIANGLE_NORMAL = Record("TriangleNormal", _vectors("float4", "n0", "n1", "n2"))
+TRIANGLE_NORMAL_DTYPE = TRIANGLE_NORMAL.dtype()
+
+#: One texel of the scene's texture atlas: linear ``rgba`` in [0, 1] (8-bit values / 255). Each texture is
+#: ``width * height`` consecutive rows, its top image row first (``engine.textures``).
+TEXEL = Record("Texel", (Field("rgba", "float4"),))
+TEXEL_DTYPE = TEXEL.dtype()
+
 #: A BVH node, 32 bytes, read by kernels as two 4-vectors whose ``w`` holds an
 #: int32 bit pattern: ``lo = (bounds_min.xyz, first)``, ``hi = (bounds_max.xyz,
 #: count)``. ``count > 0``: a leaf over triangles ``[first, first + count)``;
@@ -229,8 +240,10 @@ SPACE_NODE = Record("SpaceNode", BVH_NODE.fields)
 SPACE_NODE_DTYPE = BVH_NODE_DTYPE
 
 #: Material of a mesh instance: ``color = (r, g, b, checker_scale)`` with
-#: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``.
-MATERIAL = Record("Material", (Field("color", "float4"), Field("flags", "int4")))
+#: ``checker_scale == 0`` meaning no checker; ``flags = (cull_backfaces, 0, 0, 0)``; ``texture = (first
+#: texel, width, height, normal offset)``, width 0 meaning untextured, the offset taking a triangle's row to
+#: its ``triangle_normals`` row (read only when the instance has :data:`INSTANCE_FLAG_SMOOTH`).
+MATERIAL = Record("Material", (Field("color", "float4"), Field("flags", "int4"), Field("texture", "int4")))
 MATERIAL_DTYPE = MATERIAL.dtype()
 
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
@@ -253,7 +266,8 @@ SETTINGS_DTYPE = SETTINGS.dtype()
 
 #: A mesh entity placed in the scene: ``world_to_object`` rows (3x4 affine, camera-relative world to
 #: object space), world-space bounds (camera-relative; ``w`` unused) and ``meta = (bvh_root, material,
-#: entity, flags)`` with flags bit 0 (:data:`INSTANCE_FLAG_HAS_UVS`): the asset has UVs.
+#: entity, flags)`` with flags bit 0 (:data:`INSTANCE_FLAG_HAS_UVS`): the asset has UVs, bit 1
+#: (:data:`INSTANCE_FLAG_SMOOTH`): shaded with interpolated vertex normals.
 INSTANCE = Record(
     "Instance",
     (
@@ -342,6 +356,8 @@ RECORDS: tuple[Record, ...] = (
     SETTINGS,
     TRIANGLE,
     TRIANGLE_UV,
+    TRIANGLE_NORMAL,
+    TEXEL,
     BVH_NODE,
     BVH4_NODE,
     BVH_COMPACT_NODE,
@@ -362,6 +378,7 @@ ABERRATION_MODES: dict[str, int] = {"metric": 0, "radial": 1, "additive": 2}
 ABERRATION_EXITS: dict[str, int] = {"restore": 0, "repeat": 1, "invert": 2}
 
 INSTANCE_FLAG_HAS_UVS = 1
+INSTANCE_FLAG_SMOOTH = 2
 
 #: Light kinds shared by the packer and every kernel.
 LIGHT_KINDS: dict[str, int] = {"sun": 0, "point": 1}
@@ -377,6 +394,7 @@ KERNEL_CONSTANTS: dict[str, int] = {
     "INSTANCE_FLAG_HAS_UVS": INSTANCE_FLAG_HAS_UVS,
     **{f"LIGHT_{name.upper()}": code for name, code in LIGHT_KINDS.items()},
     "MAX_LIGHTS": MAX_LIGHTS,
+    "INSTANCE_FLAG_SMOOTH": INSTANCE_FLAG_SMOOTH,
 }
 
 #: Names of the packed tables, in the binding order every backend uses.
@@ -393,6 +411,8 @@ TABLES: tuple[str, ...] = (
     "triangle_blocks",
     "space_nodes",
     "lights",
+    "triangle_normals",
+    "texels",
 )
 
 
@@ -407,6 +427,8 @@ def table_dtype(name: str, precision: Precision) -> np.dtype:
         "tlas_nodes": TLAS_NODE_DTYPE,
         "triangle_blocks": TRIANGLE_BLOCK_DTYPE,
         "space_nodes": SPACE_NODE_DTYPE,
+        "triangle_normals": TRIANGLE_NORMAL_DTYPE,
+        "texels": TEXEL_DTYPE,
     }
     if name in fixed:
         return fixed[name]

@@ -26,6 +26,9 @@ class Features:
     lights: bool = False
     #: A light casts shadows: shadow rays travel the journey.
     shadows: bool = False
+    #: Some instance samples a texture / shades with vertex normals: without, their code compiles out.
+    textures: bool = False
+    smooth: bool = False
 
     def defines(self) -> dict[str, int]:
         return {
@@ -37,6 +40,8 @@ class Features:
             "HAS_RADIAL": int("radial" in self.aberration_modes),
             "HAS_ADDITIVE": int("additive" in self.aberration_modes),
             "MAX_EVENTS": self.max_events,
+            "HAS_TEXTURES": int(self.textures),
+            "HAS_SMOOTH": int(self.smooth),
         }
 
 

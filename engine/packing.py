@@ -30,10 +30,12 @@ from engine.bvh_wide import leaf_blocks
 from engine.camera_view import scene_camera
 from engine.layout import Precision
 from engine.maths import normalize
+from engine.normals import corner_normals
 from engine.packed import Features, PackedScene, TableUpdate
 from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
 from engine.scene import SETTINGS, Scene
+from engine.textures import DEFAULT_BUDGET_MIB, pack_atlas
 from engine.tlas import FAT_MARGIN, AabbTree
 
 
@@ -78,6 +80,7 @@ class ScenePacker:
         bvh_width: int = 2,
         tlas_margin: float = FAT_MARGIN,
         bvh_compact: bool = False,
+        texture_budget_mib: float = DEFAULT_BUDGET_MIB,
     ) -> None:
         if bvh_width not in layout.BVH_WIDTHS:
             raise ValueError(f"bvh_width must be one of {sorted(layout.BVH_WIDTHS)}, got {bvh_width!r}")
@@ -91,6 +94,10 @@ class ScenePacker:
         self.camera_relative = camera_relative
         self.origin_cell = origin_cell
         self.bvh_params = bvh_params or BvhParams()
+        #: The most MiB of texels the scene's textures may take (16 bytes a texel); past it, a clear error.
+        self.texture_budget_mib = texture_budget_mib
+        self._normal_offset: dict[tuple[str, float], int] = {}
+        self._texture_first: dict[str, int] = {}
         self.packed: PackedScene | None = None
         self._cursor = -1
         self._scene_world: str | None = None
@@ -156,7 +163,9 @@ class ScenePacker:
                 updates.append(TableUpdate("settings"))
             elif change.kind in ("transform", "mesh") and change.entity in self._instance_row:
                 mesh = scene.get(change.entity, Mesh)
-                if scene.asset(mesh.asset).content_hash not in self._asset_roots:
+                if scene.asset(mesh.asset).content_hash not in self._asset_roots or (
+                    change.kind == "mesh" and not self._has_shading_data(scene, mesh)
+                ):
                     return self._resync(scene, camera_position)
                 instance_rows.add(self._instance_row[change.entity])
                 if change.kind == "mesh":
@@ -192,6 +201,14 @@ class ScenePacker:
             packed.versions[u.table] = packed.versions.get(u.table, 0) + 1
         return updates
 
+    def _has_shading_data(self, scene: Scene, mesh: Mesh) -> bool:
+        """Whether the packed normals and texels already hold what ``mesh`` shades with."""
+        asset = scene.asset(mesh.asset)
+        if mesh.smooth and (asset.content_hash, mesh.crease_deg) not in self._normal_offset:
+            return False
+        texture = scene.texture(mesh) if asset.uvs is not None else None
+        return texture is None or texture.content_hash in self._texture_first
+
     def _node_dtype(self) -> np.dtype:
         """The ``bvh_nodes`` dtype this packer writes."""
         return layout.BVH_COMPACT_NODE_DTYPE if self.bvh_compact else layout.BVH_WIDTHS[self.bvh_width]
@@ -210,6 +227,7 @@ class ScenePacker:
         tris, uvs, nodes, blocks = [], [], [], []
         self._asset_roots = {}
         self._asset_flags: dict[str, int] = {}
+        orders: dict[str, tuple[int, np.ndarray]] = {}  # each asset's first triangle row and triangle order
         node_base = tri_base = block_base = 0
         for _, (_, mesh) in meshes:
             asset = scene.asset(mesh.asset)
@@ -242,6 +260,7 @@ class ScenePacker:
                 blocks.append(b)
                 block_base += len(b)
             self._asset_roots[asset.content_hash] = node_base
+            orders[asset.content_hash] = (tri_base, bvh.triangle_order)
             self._asset_flags[asset.content_hash] = layout.INSTANCE_FLAG_HAS_UVS if asset.uvs is not None else 0
             tris.append(t)
             uvs.append(u)
@@ -253,11 +272,14 @@ class ScenePacker:
             "triangle_uvs": np.concatenate(uvs) if uvs else np.zeros(0, layout.TRIANGLE_UV_DTYPE),
             "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, self._node_dtype()),
             "triangle_blocks": np.concatenate(blocks) if blocks else np.zeros(0, layout.TRIANGLE_BLOCK_DTYPE),
+            "triangle_normals": self._pack_normals(scene, [m for _, (_, m) in meshes], orders),
+            "texels": self._pack_texels(scene, meshes),
         }
         counts = {name: len(t) for name, t in tables.items()}
         tables = {name: _at_least_one_row(t) for name, t in tables.items()}
+        features = Features(textures=bool(self._texture_first), smooth=bool(self._normal_offset))
         self.packed = PackedScene(
-            self.precision, origin, tables, counts, Features(), np.array([e for e, _ in meshes], dtype=np.int32),
+            self.precision, origin, tables, counts, features, np.array([e for e, _ in meshes], dtype=np.int32),
             versions={name: old_versions.get(name, 0) + 1 for name in layout.TABLES},
         )  # fmt: skip
         self._pack_instances(scene)
@@ -274,6 +296,36 @@ class ScenePacker:
         self.packed.tables["lights"], self.packed.counts["lights"] = pack_lights(
             scene, self.packed.origin, self.precision
         )
+
+    def _pack_normals(self, scene: Scene, meshes: list[Mesh], orders: dict[str, tuple[int, np.ndarray]]) -> np.ndarray:
+        """Corner normals of each (asset, crease angle) a smooth mesh uses, in its triangles' packed order."""
+        self._normal_offset = {}
+        chunks: list[np.ndarray] = []
+        base = 0
+        for mesh in meshes:
+            asset = scene.asset(mesh.asset)
+            key = (asset.content_hash, mesh.crease_deg)
+            if not mesh.smooth or key in self._normal_offset:
+                continue
+            tri_base, order = orders[asset.content_hash]
+            corners = corner_normals(asset.vertices, asset.faces, mesh.crease_deg, asset.normals)[order]
+            rows = np.zeros(len(corners), dtype=layout.TRIANGLE_NORMAL_DTYPE)
+            for k, name in enumerate(("n0", "n1", "n2")):
+                rows[name][:, :3] = corners[:, k]
+            self._normal_offset[key] = base - tri_base
+            chunks.append(rows)
+            base += len(rows)
+        return np.concatenate(chunks) if chunks else np.zeros(0, layout.TRIANGLE_NORMAL_DTYPE)
+
+    def _pack_texels(self, scene: Scene, meshes: list[tuple[int, tuple[Transform, Mesh]]]) -> np.ndarray:
+        """Every distinct texture the meshes sample, in one table within the texel budget."""
+        images = []
+        for entity, (_, mesh) in meshes:
+            texture = scene.texture(mesh) if scene.asset(mesh.asset).uvs is not None else None
+            if texture is not None:
+                images.append((f"{scene.name_of(entity)}.mesh.texture", texture))
+        table, self._texture_first = pack_atlas(images, self.texture_budget_mib)
+        return table
 
     def _pack_settings(self, scene: Scene) -> None:
         assert self.packed is not None
@@ -296,9 +348,10 @@ class ScenePacker:
     def _update_features_and_counts(self, scene: Scene) -> None:
         assert self.packed is not None
         lights = self.packed.counts.get("lights", 0) > 0
-        self.packed.features = Features(
-            self.space.linked, self.space.modes, scene.settings.max_events, lights, lights and shadowing(scene)
-        )
+        self.packed.features = replace(
+            self.packed.features, portals=self.space.linked, aberration_modes=self.space.modes,
+            max_events=scene.settings.max_events, lights=lights, shadows=lights and shadowing(scene),
+        )  # fmt: skip
         self._pack_settings(scene)
 
     def _pack_instances(self, scene: Scene) -> None:
@@ -333,7 +386,7 @@ class ScenePacker:
                 self._asset_roots[asset.content_hash],
                 row,
                 entity,
-                self._asset_flags[asset.content_hash],
+                self._asset_flags[asset.content_hash] | (layout.INSTANCE_FLAG_SMOOTH if mesh.smooth else 0),
             )
 
     def _instance_bounds(self, rows: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -371,6 +424,15 @@ class ScenePacker:
         table = self.packed.tables["materials"]
         table["color"][row] = (*mesh.color, mesh.checker)
         table["flags"][row] = (int(mesh.cull_backfaces), 0, 0, 0)
+        asset = scene.asset(mesh.asset)
+        table["color"][row, :3] *= asset.base_color
+        texture = scene.texture(mesh) if asset.uvs is not None else None
+        first, height, width = 0, 0, 0
+        if texture is not None:
+            first = self._texture_first[texture.content_hash]
+            height, width = texture.pixels.shape[:2]
+        offset = self._normal_offset.get((asset.content_hash, mesh.crease_deg), 0) if mesh.smooth else 0
+        table["texture"][row] = (first, width, height, offset)
 
 
 def _merge(updates: list[TableUpdate]) -> list[TableUpdate]:

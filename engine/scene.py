@@ -27,6 +27,7 @@ from engine.errors import AberrantError, SceneError
 from engine.keyframes import Keyframe
 from engine.maths import look_at_quat, quat_from_euler_deg
 from engine.settings import Settings
+from engine.textures import TextureImage
 
 C = TypeVar("C")
 
@@ -210,6 +211,20 @@ class Scene:
             return self.library.primitive(spec.primitive)
         return self.library.load(self.asset_path(spec))
 
+    def texture(self, mesh: Mesh) -> TextureImage | None:
+        """The image a mesh samples: its ``texture`` file (resolved like mesh assets), else its asset's own.
+
+        None when it has neither, or when its file cannot be read (one warning line names the file).
+        """
+        if not mesh.texture:
+            return self.asset(mesh.asset).image
+        return self.library.textures.load(self.texture_path(mesh.texture))
+
+    def texture_path(self, texture: str) -> Path:
+        """A mesh's ``texture`` file, resolved like mesh assets (relative to the scene file's folder)."""
+        p = Path(texture).expanduser()
+        return p if p.is_absolute() or self.base_dir is None else self.base_dir / p
+
     # --- entities -----------------------------------------------------------
 
     def create_entity(self, name: str, *components: object) -> int:
@@ -352,15 +367,19 @@ class Scene:
         color: Sequence[float] = (0.8, 0.8, 0.8),
         checker: float = 0.0,
         cull_backfaces: bool = False,
+        texture: str = "",
+        smooth: bool = False,
+        crease_deg: float = 30.0,
     ) -> int:
-        """A mesh entity; ``asset`` is a registered asset name or a primitive name."""
+        """A mesh entity; ``asset`` is a registered asset name or a primitive name; ``texture`` an image file."""
         if asset not in self.assets and asset not in PRIMITIVES:
             raise SceneError(
                 f"unknown asset {asset!r}; add_asset() it first or use a primitive", entity=name, field="mesh.asset"
             )
         mesh = self._component(
-            name, "mesh", Mesh, asset=asset, color=tuple(color), checker=checker, cull_backfaces=cull_backfaces
-        )
+            name, "mesh", Mesh, asset=asset, color=tuple(color), checker=checker, cull_backfaces=cull_backfaces,
+            texture=texture, smooth=smooth, crease_deg=crease_deg,
+        )  # fmt: skip
         return self._entity_with(
             name, dict(position=position, rotation=rotation, euler_deg=euler_deg, scale=scale), mesh
         )

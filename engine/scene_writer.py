@@ -43,7 +43,12 @@ def _rotation(scene: Scene, entity: int, transform: Transform) -> dict[str, list
 
 def _asset_path(scene: Scene, spec: AssetSpec, target_dir: Path) -> str:
     """Where the asset is, as the saved file should say: relative when inside its folder, else absolute."""
-    location = Path(os.path.abspath(scene.asset_path(spec)))
+    return _file_path(scene.asset_path(spec), target_dir)
+
+
+def _file_path(path: Path, target_dir: Path) -> str:
+    """A file the scene names, as the saved file should say: relative when inside its folder, else absolute."""
+    location = Path(os.path.abspath(path))
     try:
         return location.relative_to(target_dir).as_posix()
     except ValueError:
@@ -112,6 +117,11 @@ def scene_document(scene: Scene, target_dir: Path | None = None) -> dict[str, An
                 "checker": float(mesh.checker),
                 "cull_backfaces": mesh.cull_backfaces,
             }
+            if mesh.texture:
+                item["mesh"]["texture"] = _file_path(scene.texture_path(mesh.texture), target_dir)
+            if mesh.smooth:
+                item["mesh"]["smooth"] = True
+                item["mesh"]["crease_deg"] = float(mesh.crease_deg)
         aberration = scene.try_get(entity, Aberration)
         if aberration is not None:
             item["aberration"] = {

@@ -20,8 +20,10 @@ an object's custom properties. What maps to what:
   ``<node>.<i>`` when a mesh has several), its triangles written as an OBJ in
   a folder named by the file's content, with its ``TEXCOORD_0`` (V flipped
   back from glTF's top-left origin); colour from the material's
-  ``baseColorFactor``, one-sided unless the material is ``doubleSided``, the
-  checker cell size from the material extra ``{"aberrant": {"checker": c}}``.
+  ``baseColorFactor``, its ``baseColorTexture`` image written beside the OBJ
+  as the mesh's texture, smooth shading where the primitive has normals,
+  one-sided unless the material is ``doubleSided``, the checker cell size from
+  the material extra ``{"aberrant": {"checker": c}}``.
 * **Camera**: the first node with a camera, its ``yfov`` the vertical field of
   view (to a billionth of a degree), its walking speed the node extra
   ``{"aberrant": {"camera": {"speed": s}}}``.
@@ -35,6 +37,7 @@ Every problem is one :class:`GltfError` naming the file, the node and the field.
 
 from __future__ import annotations
 
+import base64
 import hashlib
 import json
 import math
@@ -272,9 +275,12 @@ class _Importer:
             )
             self.document["assets"][asset] = {"path": f"{asset}.obj"}
         block: dict[str, Any] = {"asset": asset, "cull_backfaces": True}
+        if "NORMAL" in primitive["attributes"]:
+            block["smooth"] = True  # the file shades smoothly: normals from the faces, creases kept
         if "material" in primitive:
             material = self.gltf.item("materials", primitive["material"], node=name, field=f"{field}.material")
-            factor = material.get("pbrMetallicRoughness", {}).get("baseColorFactor")
+            pbr = material.get("pbrMetallicRoughness", {})
+            factor = pbr.get("baseColorFactor")
             if isinstance(factor, list) and len(factor) == 4:
                 block["color"] = [float(c) for c in factor[:3]]
             block["cull_backfaces"] = not material.get("doubleSided", False)
@@ -288,7 +294,42 @@ class _Importer:
                     raise self.gltf.fail(
                         f"expected a cell size >= 0 (0: none), got {checker!r}", node=name, field=where
                     )
+            texture = pbr.get("baseColorTexture")
+            if isinstance(texture, dict) and uvs is not None:
+                block["texture"] = self.image(texture.get("index"), name, f"materials[{primitive['material']}]")
         return block
+
+    def image(self, texture: object, name: str, field: str) -> str:
+        """The file name (beside the meshes) of a texture's image, its bytes taken from a URI or buffer view."""
+        where = f"{field}.pbrMetallicRoughness.baseColorTexture"
+        source = self.gltf.item("textures", texture, node=name, field=f"{where}.index").get("source")
+        spec = self.gltf.item("images", source, node=name, field=f"textures[{texture}].source")
+        file = f"image{source}{_IMAGE_SUFFIXES.get(str(spec.get('mimeType')), '.png')}"
+        if file in self.meshes:
+            return file
+        uri = spec.get("uri")
+        if isinstance(uri, str) and uri.startswith("data:"):
+            try:
+                data = base64.b64decode(uri.partition(",")[2], validate=True)
+            except ValueError as e:
+                raise self.gltf.fail(f"bad base64 data URI ({e})", node=name, field=f"images[{source}].uri") from None
+        elif isinstance(uri, str):
+            suffix = Path(uri).suffix.lower()
+            file = f"image{source}{suffix if suffix in _IMAGE_SUFFIXES.values() else '.png'}"
+            try:
+                data = (self.gltf.path.parent / uri).read_bytes()
+            except OSError:
+                data = b""  # a missing image: the texture warns when read and the mesh keeps its colour
+        else:
+            view = self.gltf.item("bufferViews", spec.get("bufferView"), node=name, field=f"images[{source}]")
+            buffer = self.gltf.buffer(view.get("buffer"), name, f"images[{source}].bufferView")  # type: ignore[arg-type]
+            start = int(view.get("byteOffset", 0))
+            data = buffer[start : start + int(view.get("byteLength", 0))]
+        self.meshes[file] = data
+        return file
+
+
+_IMAGE_SUFFIXES = {"image/png": ".png", "image/jpeg": ".jpg"}
 
 
 def gltf_document(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, bytes]]:

@@ -94,6 +94,11 @@ def _create_context() -> moderngl.Context:
     return moderngl.create_standalone_context(backend="egl", require=430)  # type: ignore[arg-type]
 
 
+#: Tables held in images under either store (bindings.glsl): with storage buffers, the rest already take the
+#: 16 storage blocks a compute shader may have.
+IMAGE_TABLES: tuple[str, ...] = ("triangle_normals", "texels")
+
+
 def _image_of(store: moderngl.Buffer | moderngl.Texture) -> moderngl.Texture:
     """A table store known to be an image (``table_store == "image"``)."""
     import moderngl
@@ -315,7 +320,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         """Write a whole table, in place when its size is unchanged, else into a new buffer or image."""
         old = self._tables.get(name)
         same = old is not None and self._table_bytes.get(name) == table.nbytes
-        if self.table_store == "image":
+        if self._in_image(name):
             texels = table.nbytes // 16
             if not same:
                 if old is not None:
@@ -340,12 +345,16 @@ class GlslBackend(shared.UploadedScene, Backend):
         """Write rows ``[start, stop)`` only; returns the bytes written."""
         part = table[rows.start : rows.stop]
         target = self._tables[name]
-        if self.table_store != "image":
+        if not self._in_image(name):
             _buffer_of(target).write(part, offset=rows.start * table.dtype.itemsize)
             return part.nbytes
         stride = table.dtype.itemsize // 16
         _write_texels(_image_of(target), rows.start * stride, part.view(np.uint32).reshape(-1, 4))
         return part.nbytes
+
+    def _in_image(self, name: str) -> bool:
+        """Whether a table lives in an image (every table with the image store; :data:`IMAGE_TABLES` always)."""
+        return self.table_store == "image" or name in IMAGE_TABLES
 
     def read_table(self, name: str) -> bytes:
         """The bytes of an uploaded table as the device holds them (tests, debugging)."""
@@ -353,7 +362,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         if store is None:
             raise AberrantError(f"glsl backend: table {name!r} has not been uploaded")
         with self._current():
-            data = _image_of(store).read(alignment=1) if self.table_store == "image" else store.read()
+            data = _image_of(store).read(alignment=1) if self._in_image(name) else store.read()
         return data[: self._table_bytes[name]]
 
     # --- shaders ---------------------------------------------------------------------
@@ -445,7 +454,10 @@ class GlslBackend(shared.UploadedScene, Backend):
                 camera_buffer = _buffer_of(self._camera)
                 camera_buffer.write(row)
                 for binding, name in enumerate(layout.TABLES):
-                    _buffer_of(self._tables[name]).bind_to_storage_buffer(binding)
+                    if name in IMAGE_TABLES:
+                        _image_of(self._tables[name]).bind_to_image(binding + 1, read=True, write=False)
+                    else:
+                        _buffer_of(self._tables[name]).bind_to_storage_buffer(binding)
                 camera_buffer.bind_to_storage_buffer(CAMERA_BINDING)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:

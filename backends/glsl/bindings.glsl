@@ -121,3 +121,22 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 #define CAMERA_ROW (camera_data[0])
 
 #endif
+
+/* Vertex normals and texels live in RGBA32UI images under either store (image unit = table index + 1): with
+ * storage buffers, the other tables, the camera and the AOVs already take the 16 storage blocks a compute
+ * shader may have (GL_MAX_COMPUTE_SHADER_STORAGE_BLOCKS on Mesa and NVIDIA). */
+#define SHADING_F4_(img, i) uintBitsToFloat(imageLoad(img, ivec2((i) & (TABLE_WIDTH - 1), (i) >> TABLE_WIDTH_LOG2)))
+#if HAS_SMOOTH
+layout(rgba32ui, binding = 13) readonly restrict uniform uimage2D triangle_normals_img;
+TriangleNormal fetch_triangle_normal_(int i)
+{
+    int b = i * TRIANGLE_NORMALS_STRIDE;
+    return TriangleNormal(SHADING_F4_(triangle_normals_img, b), SHADING_F4_(triangle_normals_img, b + 1),
+                          SHADING_F4_(triangle_normals_img, b + 2));
+}
+#define TRIANGLE_NORMAL(i) (fetch_triangle_normal_(i))
+#endif
+#if HAS_TEXTURES
+layout(rgba32ui, binding = 14) readonly restrict uniform uimage2D texels_img;
+#define TEXEL(i) (Texel(SHADING_F4_(texels_img, (i) * TEXELS_STRIDE)))
+#endif

@@ -20,6 +20,8 @@ __kernel void trace(__global const Settings* settings,
                     __global const TriangleBlock* triangle_blocks,
                     __global const SpaceNode* space_nodes,
                     __global const Light* lights,
+                    __global const TriangleNormal* triangle_normals,
+                    __global const Texel* texels,
                     __global const Camera* camera,
                     __global uchar4* color_out,
                     __global float* depth_out,
@@ -46,6 +48,8 @@ __kernel void trace(__global const Settings* settings,
     sc.triangle_blocks = triangle_blocks;
     sc.space_nodes = space_nodes;
     sc.lights = lights;
+    sc.triangle_normals = triangle_normals;
+    sc.texels = texels;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {

@@ -20,7 +20,7 @@ from engine.layout import Precision, bvh_compact, bvh_width
 from engine.packed import Features, PackedScene, TableUpdate
 
 #: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
-_MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes")
+_MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes", "triangle_normals", "texels")
 _INSTANCE_TABLES = ("instances", "materials")
 
 

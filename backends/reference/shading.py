@@ -50,21 +50,26 @@ def shade(
     hits: MeshHits,
     direction: np.ndarray,
     world_position: np.ndarray,
-    lighting: Callable[[np.ndarray], np.ndarray] | None = None,
+    lighting: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
 ) -> np.ndarray:
-    """``base · checker · (ambient + (1 − ambient)·Σ)`` with n turned to face the ray; ``Σ`` is ``lighting(n)``
-    (the lights' sum, :func:`light_sum`) or, without it, the implicit sun's ``max(0, n·l)``."""
+    """``base · texture · checker · (ambient + (1 − ambient)·Σ)``; ``Σ`` is ``lighting(n_s, n)`` (the lights' sum,
+    :func:`light_sum`) or, without it, the implicit sun's ``max(0, n_s·l)``.
+
+    n is the geometric normal turned to face the ray; n_s the shading normal (:func:`shading_normals`).
+    """
     n = world_normals(geo, hits.instance, hits.triangle)
-    n = np.where(np.sum(n * direction, axis=1, keepdims=True) > 0.0, -n, n)
+    flipped = np.sum(n * direction, axis=1) > 0.0
+    n = np.where(flipped[:, None], -n, n)
+    n_s = shading_normals(geo, hits, n, flipped)
     material = geo.material[hits.instance]
-    base = geo.color[material, :3]
+    base = geo.color[material, :3] * texture_colors(geo, hits)
     cell = geo.color[material, 3]
     factor = checker_factor(geo, hits, n, world_position, cell)
     if lighting is None:
-        lambert = np.maximum(0.0, n @ settings.light_dir)
+        lambert = np.maximum(0.0, n_s @ settings.light_dir)
         color = base * (factor * (settings.ambient + (1.0 - settings.ambient) * lambert))[:, None]
     else:
-        color = base * (factor[:, None] * (settings.ambient + (1.0 - settings.ambient) * lighting(n)))
+        color = base * (factor[:, None] * (settings.ambient + (1.0 - settings.ambient) * lighting(n_s, n)))
     return np.where(np.isfinite(color), color, 0.0)
 
 
@@ -99,10 +104,11 @@ class Lights:
 ShadowTest = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
-def light_sum(lights: Lights, n: np.ndarray, position: np.ndarray, lit: ShadowTest) -> np.ndarray:
+def light_sum(lights: Lights, n_s: np.ndarray, n: np.ndarray, position: np.ndarray, lit: ShadowTest) -> np.ndarray:
     """``Σ colour·max(0, n·l)·falloff·lit`` over the lights (N, 3): a sun's falloff is 1; a point light's is
     ``1/d²``, times ``clamp(1 − (d/range)⁴, 0, 1)²`` with a range. A light behind the surface sends no shadow
-    ray; a shadowing light's rays decide ``lit``, the others' are lit."""
+    ray; a shadowing light's rays decide ``lit``, the others' are lit. The shading normal ``n_s`` weighs, the
+    shadow rays leave along the geometric ``n``."""
     total = np.zeros((len(n), 3))
     for k in range(len(lights)):
         if lights.point[k]:
@@ -117,12 +123,60 @@ def light_sum(lights: Lights, n: np.ndarray, position: np.ndarray, lit: ShadowTe
             towards = np.broadcast_to(lights.vector[k], n.shape)
             falloff = np.ones(len(n))
             reach = np.full(len(n), np.inf)
-        weight = np.maximum(0.0, np.sum(n * towards, axis=1)) * falloff
+        weight = np.maximum(0.0, np.sum(n_s * towards, axis=1)) * falloff
         rows = np.flatnonzero(weight > 0.0)
         if lights.shadows[k] and rows.size:
             weight[rows] *= lit(rows, n[rows], np.ascontiguousarray(towards[rows]), reach[rows])
         total += lights.color[k] * weight[:, None]
     return total
+
+
+def shading_normals(geo: Geometry, hits: MeshHits, n: np.ndarray, flipped: np.ndarray) -> np.ndarray:
+    """Unit world normals to light by: smooth instances' corner normals interpolated at the hit (through the
+    inverse transpose, turned with the geometric normal ``n``), else ``n`` itself."""
+    out = n.copy()
+    rows = np.flatnonzero((geo.flags[hits.instance] & 2) != 0)
+    if rows.size == 0:
+        return out
+    index = hits.triangle[rows] + geo.texture[geo.material[hits.instance[rows]], 3]
+    n_obj = np.einsum("nk,nkj->nj", hits.bary[rows], geo.normals[index])
+    linear = geo.world_to_object[hits.instance[rows]][:, :, :3]
+    s = np.einsum("nji,nj->ni", linear, n_obj)
+    norm = np.linalg.norm(s, axis=1, keepdims=True)
+    s = np.where(norm > 0, s / np.where(norm > 0, norm, 1.0), n[rows])
+    out[rows] = np.where(flipped[rows, None] & (norm > 0), -s, s)
+    return out
+
+
+def texture_colors(geo: Geometry, hits: MeshHits) -> np.ndarray:
+    """(R, 3) texture colour at each hit's UV, 1 where the instance samples none.
+
+    Bilinear between texel centres with repeat wrap: with ``f = u − floor(u)``, ``g = v − floor(v)``,
+    ``s = f·W − ½`` and ``t = (1 − g)·H − ½`` (image row 0 is the top, v = 1), the four texels around
+    ``(s, t)`` (indices wrapped mod W, H) weighted by the fractions of ``s`` and ``t``.
+    """
+    out = np.ones((len(hits.t), 3))
+    material = geo.material[hits.instance]
+    tex = geo.texture[material]
+    rows = np.flatnonzero((tex[:, 1] > 0) & ((geo.flags[hits.instance] & 1) != 0))
+    if rows.size == 0:
+        return out
+    first, w, h = tex[rows, 0], tex[rows, 1], tex[rows, 2]
+    uv = np.einsum("nk,nkj->nj", hits.bary[rows], geo.uv[hits.triangle[rows]])
+    s = (uv[:, 0] - np.floor(uv[:, 0])) * w - 0.5
+    t = (1.0 - (uv[:, 1] - np.floor(uv[:, 1]))) * h - 0.5
+    x0, y0 = np.floor(s), np.floor(t)
+    ax, ay = (s - x0)[:, None], (t - y0)[:, None]
+    x0, y0 = np.mod(x0.astype(np.int64), w), np.mod(y0.astype(np.int64), h)
+    x1, y1 = np.where(x0 + 1 >= w, 0, x0 + 1), np.where(y0 + 1 >= h, 0, y0 + 1)
+
+    def texel(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return geo.texels[first + y * w + x, :3]
+
+    top = (1.0 - ax) * texel(x0, y0) + ax * texel(x1, y0)
+    bottom = (1.0 - ax) * texel(x0, y1) + ax * texel(x1, y1)
+    out[rows] = (1.0 - ay) * top + ay * bottom
+    return out
 
 
 def checker_factor(

@@ -354,8 +354,8 @@ def _finish_mesh(
         def lit(at: np.ndarray, n: np.ndarray, towards: np.ndarray, reach: np.ndarray) -> np.ndarray:
             return shadow_rays_lit(geo, settings, space, position[at], n, towards, reach)
 
-        def lighting(n: np.ndarray) -> np.ndarray:
-            return light_sum(lights, n, position, lit)
+        def lighting(n_s: np.ndarray, n: np.ndarray) -> np.ndarray:
+            return light_sum(lights, n_s, n, position, lit)
 
     out.color[state.index] = shade(geo, settings, hits, state.r, position + world_origin, lighting)
     out.depth[state.index] = state.length + step

@@ -37,6 +37,8 @@ class Geometry:
     v1: np.ndarray
     v2: np.ndarray
     uv: np.ndarray  # (T, 3, 2)
+    normals: np.ndarray  # (TN, 3, 3) corner normals of smooth meshes' triangles
+    texels: np.ndarray  # (X, 4) the texture atlas, rgba
     node_lo: np.ndarray  # (N, 3)
     node_hi: np.ndarray
     node_first: np.ndarray  # (N,) int64
@@ -50,6 +52,7 @@ class Geometry:
     flags: np.ndarray
     color: np.ndarray  # (M, 4): rgb, checker cell size
     cull: np.ndarray  # (M,) bool
+    texture: np.ndarray  # (M, 4) int64: first texel, width, height, normal row offset
     tree: InstanceTree  # over the instance world bounds
 
     @property
@@ -88,11 +91,12 @@ class Geometry:
             flags=meta[:, 3],
             color=mats["color"].astype(np.float64),
             cull=mats["flags"][:, 0] != 0,
+            texture=mats["texture"].astype(np.int64),
             tree=build_instance_tree(lo, hi),
         )
 
 
-_MESH_FIELDS = ("v0", "v1", "v2", "uv", "node_lo", "node_hi", "node_first", "node_count")
+_MESH_FIELDS = ("v0", "v1", "v2", "uv", "normals", "texels", "node_lo", "node_hi", "node_first", "node_count")
 
 
 def _mesh_arrays(tables: Mapping[str, np.ndarray], counts: Mapping[str, int]) -> dict[str, np.ndarray]:
@@ -100,6 +104,7 @@ def _mesh_arrays(tables: Mapping[str, np.ndarray], counts: Mapping[str, int]) ->
     tri = tables["triangles"][: counts["triangles"]]
     uvs = tables["triangle_uvs"][: counts["triangles"]]
     nodes = tables["bvh_nodes"][: counts["bvh_nodes"]]
+    normals = tables["triangle_normals"][: counts.get("triangle_normals", 0)]
     uv = np.empty((len(uvs), 3, 2))
     uv[:, 0] = uvs["uv01"][:, :2]
     uv[:, 1] = uvs["uv01"][:, 2:]
@@ -109,6 +114,8 @@ def _mesh_arrays(tables: Mapping[str, np.ndarray], counts: Mapping[str, int]) ->
         "v1": tri["v1"][:, :3].astype(np.float64),
         "v2": tri["v2"][:, :3].astype(np.float64),
         "uv": uv,
+        "normals": np.stack([normals[k][:, :3] for k in ("n0", "n1", "n2")], axis=1).astype(np.float64),
+        "texels": tables["texels"][: counts.get("texels", 0)]["rgba"].astype(np.float64),
         "node_lo": nodes["bounds_min"].astype(np.float64),
         "node_hi": nodes["bounds_max"].astype(np.float64),
         "node_first": nodes["first"].astype(np.int64),

@@ -23,6 +23,8 @@ typedef struct SceneTables {
     __global const TriangleBlock* triangle_blocks;
     __global const SpaceNode* space_nodes;
     __global const Light* lights;
+    __global const TriangleNormal* triangle_normals;
+    __global const Texel* texels;
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -41,3 +43,5 @@ typedef struct SceneTables {
 #define TRIANGLE_BLOCK(i) (sc.triangle_blocks[(i)])
 #define SPACE_NODE(i) (sc.space_nodes[(i)])
 #define LIGHT(i) (sc.lights[(i)])
+#define TRIANGLE_NORMAL(i) (sc.triangle_normals[(i)])
+#define TEXEL(i) (sc.texels[(i)])

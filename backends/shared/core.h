@@ -38,6 +38,8 @@
  * Compile-time defines (engine.packed.Features.defines() and the backend):
  *   HAS_PORTALS        linked portals exist: portal search and teleport
  *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions
+ *   HAS_TEXTURES       some material samples the texel atlas (TEXEL(i))
+ *   HAS_SMOOTH         some instance shades with vertex normals (TRIANGLE_NORMAL(i))
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
  *   HAS_LIGHTS         Light entities exist (the lights table), else the implicit sun along light_dir
  *   HAS_SHADOWS        a light casts shadows: shadow rays take the journey (journey.h, shadow_lit)
@@ -87,6 +89,12 @@
 #endif
 #ifndef HAS_SHADOWS
 #define HAS_SHADOWS 0
+#endif
+#ifndef HAS_TEXTURES
+#define HAS_TEXTURES 0
+#endif
+#ifndef HAS_SMOOTH
+#define HAS_SMOOTH 0
 #endif
 #ifndef REAL_IS_DOUBLE
 #define REAL_IS_DOUBLE 0

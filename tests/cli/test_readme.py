@@ -65,7 +65,9 @@ def test_level_as_code_example_builds(tmp_path: Path) -> None:
     scene.base_dir = _statue_dir(tmp_path)
     scene.validate()
     assert scene.asset("statue").triangle_count > 100
-    assert len(scene.query(Mesh)) == 3
+    assert len(scene.query(Mesh)) == 4
+    assert scene.get(scene.entity("sign"), Mesh).texture == "images/sign.png"
+    assert scene.get(scene.entity("statue"), Mesh).smooth
     assert len(scene.query(Aberration)) == 1
     assert len(scene.query(Portal)) == 2
     assert scene.get(scene.entity("long_hall"), Aberration).deformation[2] < 0, "a long hall stretches z"

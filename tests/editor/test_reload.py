@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from aberrant.levels import open_level
-from components import Transform
+from components import Mesh, Transform
 from editor.model import EditorModel
 from editor.reload import DocumentReload, LevelWatcher, keep_camera
 from engine.scene import Scene
@@ -123,6 +123,31 @@ def test_a_changed_mesh_file_reloads(tmp_path):
     touch(tmp_path / "tri.obj", "this is not a mesh\n")
     clock.tick()
     assert watcher.poll() is None and watcher.error is not None and "tri.obj" in watcher.error
+    scene.close()
+    new.close()
+
+
+def test_a_changed_texture_file_reloads_with_the_new_texels(tmp_path):
+    from PIL import Image
+
+    clock = Clock()
+    image = tmp_path / "paint.png"
+    Image.new("RGB", (2, 2), (255, 0, 0)).save(image)
+    scene = Scene("textured")
+    scene.add_mesh("sign", "quad", texture=str(image))
+    scene.set_camera((0.0, 0.0, 3.0))
+    path = tmp_path / "level.json"
+    save_scene(scene, path)
+    scene.close()
+    watcher, scene = watcher_for(path, clock)
+    assert image.resolve() in [f.resolve() for f in watcher.files]
+    Image.new("RGB", (2, 2), (0, 0, 255)).save(image)
+    os.utime(image, ns=(image.stat().st_atime_ns, image.stat().st_mtime_ns + 1_000_000_000))
+    clock.tick()
+    new = watcher.poll()
+    assert new is not None
+    texture = new.texture(new.get(new.entity("sign"), Mesh))
+    assert texture is not None and tuple(texture.pixels[0, 0]) == (0, 0, 255, 255)
     scene.close()
     new.close()
 

@@ -28,7 +28,9 @@ EXPECTED = {
     ("triangle_uvs", "f32"): ({"uv01": 0, "uv2": 16}, 32),
     ("bvh_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
     ("space_nodes", "f32"): ({"bounds_min": 0, "first": 12, "bounds_max": 16, "count": 28}, 32),
-    ("materials", "f32"): ({"color": 0, "flags": 16}, 32),
+    ("materials", "f32"): ({"color": 0, "flags": 16, "texture": 32}, 48),
+    ("triangle_normals", "f32"): ({"n0": 0, "n1": 16, "n2": 32}, 48),
+    ("texels", "f32"): ({"rgba": 0}, 16),
     ("triangle_blocks", "f32"): (
         {
             "v0x": 0,
