@@ -78,7 +78,7 @@ SpaceRay space_ray(real3 o, real3 r)
 /* Entry and exit t of a ray against a space tree's node grown by the ray's padding. The host grew the
  * leaves by SPACE_SLACK of their own coordinates' size; the two cover the rounding of the quad and box
  * tests in their local frames, so a ray those tests accept is always inside (docs/semantics.md section 14).
- * A SLAB for BINARY_STEP (core.h). */
+ * SPACE_LEAVES_BEGIN's slab. */
 real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
 {
     real3 t0 = (TO_REAL3(n.lo.xyz) - o) * sr.inv;
@@ -88,26 +88,59 @@ real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
     return R2(max(max(tn.x, tn.y), tn.z), min(min(tf.x, tf.y), tf.z));
 }
 
+/* A node as the walk keeps it: an interior node's first child, or ~row for a leaf (rows are >= 0, an
+ * interior node's first child > 0: the root is never a child), so a popped node needs no second load. */
+#define SPACE_AT(n) (AS_INT(n.hi.w) == 0 ? AS_INT(n.lo.w) : ~AS_INT(n.lo.w))
+
+/* The next stacked node entered no later than best.t into at; more tells whether there was one. */
+#define SPACE_POP                                                                                    \
+    more = false;                                                                                    \
+    while (sp > 0 && !more) {                                                                        \
+        sp -= 1;                                                                                     \
+        if (stack_t[sp] <= best.t) {                                                                 \
+            at = stack_at[sp];                                                                       \
+            more = true;                                                                             \
+        }                                                                                            \
+    }
+
 /* The leaves of a space tree from root that the ray (o, r) enters within (t_min, best.t], nearest first:
  * SPACE_LEAVES_BEGIN(root) declares the traversal and stands at each leaf with its row in `leaf`, for the
  * caller's test (which may lower best.t); SPACE_LEAVES_END pops to the next. While-while, as the tree over
- * instances (instances.h): the leaf test runs outside the descent loop. */
+ * instances (instances.h): the leaf test runs outside the descent loop. A visit loads both children, slabs
+ * them (space_slab), goes on to the nearer one entered and stacks the other with its entry t (the host
+ * sizes the stack to the tree's depth); the stack holds SPACE_AT, so a pop loads nothing. */
 #define SPACE_LEAVES_BEGIN(root)                                                                     \
     SpaceRay sr = space_ray(o, r);                                                                   \
-    int stack_node[SPACE_STACK_SIZE];                                                                \
+    int stack_at[SPACE_STACK_SIZE];                                                                  \
     real stack_t[SPACE_STACK_SIZE];                                                                  \
     int sp = 0;                                                                                      \
-    SpaceNode node = SPACE_NODE(root);                                                               \
-    bool more = slab_hit(space_slab(o, sr, node), t_min, best.t);                                    \
+    SpaceNode top = SPACE_NODE(root);                                                                \
+    int at = SPACE_AT(top);                                                                          \
+    bool more = slab_hit(space_slab(o, sr, top), t_min, best.t);                                     \
     while (more) {                                                                                   \
-        while (AS_INT(node.hi.w) == 0 && more) {                                                     \
-            int first = AS_INT(node.lo.w);                                                           \
-            BINARY_STEP(SpaceNode, SPACE_NODE, SPACE_STACK_SIZE, space_slab, o, sr, first, more)      \
+        while (at >= 0 && more) {                                                                    \
+            SpaceNode c0 = SPACE_NODE(at);                                                           \
+            SpaceNode c1 = SPACE_NODE(at + 1);                                                       \
+            real2 h0 = space_slab(o, sr, c0);                                                        \
+            real2 h1 = space_slab(o, sr, c1);                                                        \
+            bool hit0 = slab_hit(h0, t_min, best.t);                                                 \
+            bool hit1 = slab_hit(h1, t_min, best.t);                                                 \
+            if (hit0 || hit1) {                                                                      \
+                bool second_first = hit1 && (!hit0 || h1.x < h0.x);                                  \
+                if (hit0 && hit1 && sp < SPACE_STACK_SIZE) {                                         \
+                    stack_at[sp] = second_first ? SPACE_AT(c0) : SPACE_AT(c1);                       \
+                    stack_t[sp] = second_first ? h0.x : h1.x;                                        \
+                    sp += 1;                                                                         \
+                }                                                                                    \
+                at = second_first ? SPACE_AT(c1) : SPACE_AT(c0);                                     \
+            } else {                                                                                 \
+                SPACE_POP                                                                            \
+            }                                                                                        \
         }                                                                                            \
         if (more) {                                                                                  \
-            int leaf = AS_INT(node.lo.w);
+            int leaf = ~at;
 #define SPACE_LEAVES_END                                                                             \
-            BINARY_POP(SPACE_NODE, more)                                                             \
+            SPACE_POP                                                                                \
         }                                                                                            \
     }
 #endif
