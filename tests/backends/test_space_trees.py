@@ -18,6 +18,7 @@ from test_parity import assert_clean, compare, render
 from test_parity_aberrations import grazing_and_touching, mixed_overlap
 from test_parity_portals import doors, portal_in_aberrations
 
+from aberrant.bench.space import space_scene
 from backends.base import AOVS
 from components import Transform
 from engine.camera_view import scene_camera
@@ -41,6 +42,9 @@ CASES = {
     "grazing-and-touching": grazing_and_touching,
     "portals-40": lambda: crowded("portals", 40, seed=1),
     "boxes-40": lambda: crowded("boxes", 40, seed=2),
+    # Deep trees (256 leaves) whose every in-view ray descends to a leaf of the grid and pops back.
+    "portals-grid-256": lambda: space_scene("portals", "in", 256),
+    "boxes-grid-256": lambda: space_scene("boxes", "in", 256),
 }
 
 
