@@ -285,6 +285,8 @@ def _load_mesh_file(path: Path, data: bytes) -> MeshAsset:
         raise AssetError(f"{path}: holds no triangles")
     uv = getattr(getattr(loaded, "visual", None), "uv", None)
     image, base_color = _material(loaded, path)
+    if suffix == ".obj" and not any(line.startswith(b"mtllib") for line in data.splitlines()):
+        image, base_color = None, (1.0, 1.0, 1.0)  # trimesh's stand-in material (a grey 2x2 image) for UVs alone
     if image is None and suffix == ".obj":
         _warn_missing_map_kd(path, data)
     return make_asset(

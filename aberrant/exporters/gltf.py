@@ -7,8 +7,10 @@ scene, so a level can go to Blender and come back:
   ``TEXCOORD_0`` with glTF's top-left origin) are written once; a glTF mesh per
   (asset, material) pair shares them, and each mesh entity is a root node with
   its world TRS instancing one. Materials carry ``baseColorFactor`` (the
-  colour), ``doubleSided`` (not ``cull_backfaces``) and the checker cell size
-  as the material extra ``{"aberrant": {"checker": c}}``.
+  colour), ``baseColorTexture`` (the image the mesh samples, as a PNG),
+  ``doubleSided`` (not ``cull_backfaces``) and the checker cell size and smooth
+  shading as the material extra ``{"aberrant": {"checker": c, "smooth": true,
+  "crease_deg": a}}``.
 * **Aberrations and portals** are nodes whose extras hold the component,
   ``{"aberrant": {"aberration": {...}}}`` / ``{"aberrant": {"portal": {"target":
   "<node name>", ...}}}``, with the scene-file keys. So that Blender shows the
@@ -30,6 +32,7 @@ Node names are the entities' names (unique; an empty one becomes ``entity<i>``).
 from __future__ import annotations
 
 import base64
+import io
 import json
 import math
 import os
@@ -38,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import PIL.Image
 
 from aberrant.importers.gltf import unique_name
 from components import Aberration, Camera, Light, Mesh, Portal, Transform
@@ -46,6 +50,7 @@ from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError, shorten
 from engine.scene import Scene
 from engine.scene_writer import scene_document
+from engine.textures import TextureImage
 
 #: The suffixes :func:`export_gltf` writes.
 EXPORT_SUFFIXES = (".glb", ".gltf")
@@ -73,6 +78,7 @@ class _Writer:
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
         self.blob = bytearray()
+        self.textures: dict[str, int] = {}
         self.doc: dict[str, Any] = {
             "asset": {"version": "2.0", "generator": "aberrant"},
             "scene": 0,
@@ -88,11 +94,21 @@ class _Writer:
         items.append(item)
         return len(items) - 1
 
-    def view(self, data: bytes, target: int) -> int:
+    def view(self, data: bytes, target: int | None) -> int:
         self.blob += b"\0" * (-len(self.blob) % 4)
         offset = len(self.blob)
         self.blob += data
-        return self.add("bufferViews", {"buffer": 0, "byteOffset": offset, "byteLength": len(data), "target": target})
+        item = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
+        return self.add("bufferViews", item if target is None else {**item, "target": target})
+
+    def texture(self, image: TextureImage) -> int:
+        """A glTF texture of ``image`` (a PNG in the buffer), written once per distinct image."""
+        if image.content_hash not in self.textures:
+            png = io.BytesIO()
+            PIL.Image.fromarray(image.pixels).save(png, format="PNG")
+            source = self.add("images", {"bufferView": self.view(png.getvalue(), None), "mimeType": "image/png"})
+            self.textures[image.content_hash] = self.add("textures", {"source": source})
+        return self.textures[image.content_hash]
 
     def accessor(self, array: np.ndarray, kind: str, target: int, bounds: bool = False) -> int:
         component = _UINT if array.dtype == np.uint32 else _FLOAT
@@ -114,6 +130,8 @@ class _Writer:
                 uvs = asset.uvs.astype(np.float64)
                 uvs[:, 1] = 1.0 - uvs[:, 1]  # glTF's UV origin is the image's top left
                 attributes["TEXCOORD_0"] = self.accessor(uvs.astype("<f4"), "VEC2", _ARRAY_BUFFER)
+            if asset.normals is not None:
+                attributes["NORMAL"] = self.accessor(asset.normals.astype("<f4"), "VEC3", _ARRAY_BUFFER)
             indices = self.accessor(asset.faces.reshape(-1).astype("<u4"), "SCALAR", _ELEMENT_ARRAY_BUFFER)
             self.geometry[name] = {"indices": indices, **attributes}
         return self.geometry[name]
@@ -188,10 +206,18 @@ def gltf_document(scene: Scene) -> tuple[dict[str, Any], bytes]:
             )
         item: dict[str, Any] = {"name": name, **_trs(transform)}
         if mesh is not None:
+            # smooth always written: a NORMAL attribute alone reads back as a smooth mesh
+            shading: dict[str, Any] = {"checker": float(mesh.checker), "smooth": bool(mesh.smooth)}
+            if mesh.smooth:
+                shading["crease_deg"] = float(mesh.crease_deg)
+            pbr: dict[str, Any] = {"baseColorFactor": [*map(float, mesh.color), 1.0], "metallicFactor": 0.0}
+            image = scene.texture(mesh) if scene.asset(mesh.asset).uvs is not None else None
+            if image is not None:
+                pbr["baseColorTexture"] = {"index": writer.texture(image)}
             material = {
-                "pbrMetallicRoughness": {"baseColorFactor": [*map(float, mesh.color), 1.0], "metallicFactor": 0.0},
+                "pbrMetallicRoughness": pbr,
                 "doubleSided": not mesh.cull_backfaces,
-                "extras": {"aberrant": {"checker": float(mesh.checker)}},
+                "extras": {"aberrant": shading},
             }
             item["mesh"] = writer.mesh(mesh.asset, scene.asset(mesh.asset), material)
         elif aberration is not None:

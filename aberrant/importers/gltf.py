@@ -23,7 +23,8 @@ an object's custom properties. What maps to what:
   ``baseColorFactor``, its ``baseColorTexture`` image written beside the OBJ
   as the mesh's texture, smooth shading where the primitive has normals,
   one-sided unless the material is ``doubleSided``, the checker cell size from
-  the material extra ``{"aberrant": {"checker": c}}``.
+  the material extra ``{"aberrant": {"checker": c}}`` (and ``"smooth"``,
+  ``"crease_deg"`` there, as a mesh's fields).
 * **Camera**: the first node with a camera, its ``yfov`` the vertical field of
   view (to a billionth of a degree), its walking speed the node extra
   ``{"aberrant": {"camera": {"speed": s}}}``.
@@ -267,16 +268,23 @@ class _Importer:
                 )
             uvs = uvs.astype(np.float64)
             uvs[:, 1] = 1.0 - uvs[:, 1]  # glTF's UV origin is the image's top left, ours the bottom left
+        normals = None
+        if "NORMAL" in primitive["attributes"]:
+            normals = self.gltf.accessor(primitive["attributes"]["NORMAL"], name, f"{field}.attributes.NORMAL")
+            if normals.shape != (len(vertices), 3) or normals.dtype != np.float32:
+                raise self.gltf.fail(
+                    "expected float VEC3 normals, one per vertex", node=name, field=f"{field}.attributes.NORMAL"
+                )
         asset = f"mesh{mesh_index}.{i}"
         if asset not in self.document["assets"]:
             self.meshes[f"{asset}.obj"] = mesh_to_obj(
-                TelloMesh(vertices.astype(np.float32), faces, None if uvs is None else uvs.astype(np.float32)),
+                TelloMesh(vertices.astype(np.float32), faces, None if uvs is None else uvs.astype(np.float32), normals),
                 f"{self.gltf.file} {field}",
             )
             self.document["assets"][asset] = {"path": f"{asset}.obj"}
         block: dict[str, Any] = {"asset": asset, "cull_backfaces": True}
         if "NORMAL" in primitive["attributes"]:
-            block["smooth"] = True  # the file shades smoothly: normals from the faces, creases kept
+            block["smooth"] = True  # the file shades smoothly, with its vertex normals
         if "material" in primitive:
             material = self.gltf.item("materials", primitive["material"], node=name, field=f"{field}.material")
             pbr = material.get("pbrMetallicRoughness", {})
@@ -294,6 +302,9 @@ class _Importer:
                     raise self.gltf.fail(
                         f"expected a cell size >= 0 (0: none), got {checker!r}", node=name, field=where
                     )
+            for key in ("smooth", "crease_deg"):
+                if isinstance(extras, dict) and key in extras.get("aberrant", {}):
+                    block[key] = extras["aberrant"][key]  # validated with the mesh block by the scene-file reader
             texture = pbr.get("baseColorTexture")
             if isinstance(texture, dict) and uvs is not None:
                 block["texture"] = self.image(texture.get("index"), name, f"materials[{primitive['material']}]")

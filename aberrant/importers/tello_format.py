@@ -30,11 +30,12 @@ class TelloError(SceneFileError):
 
 @dataclass
 class TelloMesh:
-    """A decoded mesh resource (normals are not kept: our tracer uses geometric normals)."""
+    """A decoded mesh: positions, faces, optional UVs and vertex normals, written out as an OBJ."""
 
     vertices: np.ndarray  # (N, 3) float32
     faces: np.ndarray  # (M, 3) int64
     uvs: np.ndarray | None  # (N, 2) float32
+    normals: np.ndarray | None = None  # (N, 3) vertex normals for smooth shading (glTF's NORMAL; Tello's are not kept)
 
 
 def read_mesh_resource(path: Path) -> TelloMesh:
@@ -69,9 +70,12 @@ def mesh_to_obj(mesh: TelloMesh, comment: str) -> bytes:
     lines += [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in mesh.vertices]
     if mesh.uvs is not None:
         lines += [f"vt {float(u)!r} {float(v)!r}" for u, v in mesh.uvs]
-        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in mesh.faces]
-    else:
-        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]
+    if mesh.normals is not None:
+        lines += [f"vn {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in mesh.normals]
+    uv, normal = mesh.uvs is not None, mesh.normals is not None
+    suffix = "/{0}/{0}" if uv and normal else "/{0}" if uv else "//{0}" if normal else ""
+    corner = "{0}" + suffix
+    lines += [" ".join(["f", *(corner.format(int(i) + 1) for i in face)]) for face in mesh.faces]
     return ("\n".join(lines) + "\n").encode("ascii")
 
 

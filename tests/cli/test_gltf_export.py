@@ -59,6 +59,11 @@ def assert_same_scene(original: Scene, loaded: Scene) -> None:
         assert (ma is None) == (mb is None), name
         if ma is not None and mb is not None:
             assert (ma.color, ma.checker, ma.cull_backfaces) == (mb.color, mb.checker, mb.cull_backfaces), name
+            assert (ma.smooth, ma.crease_deg) == (mb.smooth, mb.crease_deg), name
+            ia, ib = original.texture(ma), loaded.texture(mb)
+            assert (ia is None) == (ib is None), name
+            if ia is not None and ib is not None:
+                np.testing.assert_array_equal(ia.pixels, ib.pixels)
             ga, gb = original.asset(ma.asset), loaded.asset(mb.asset)
             np.testing.assert_array_equal(ga.vertices, gb.vertices)
             np.testing.assert_array_equal(ga.faces, gb.faces)
