@@ -13,14 +13,16 @@ node (``count == 0``) has children ``first`` and ``first + 1``. Leaves hold a
 single instance so that each instance row has exactly one leaf, which an
 incremental update can find without a search.
 
-It is a *dynamic AABB tree* (as in Box2D): a leaf's bounds are the instance's
-world bounds grown by a margin (:data:`FAT_MARGIN` of its extent on every
-side, see :func:`fatten`). A moved instance whose exact bounds stay inside its fat box
-changes nothing here (its exact bounds are on its instance row, which the
-kernel tests after the leaf); one that leaves it gets a new fat box and its
-path to the root is refitted (a few rows); when many leave at once, or the
-instance set changes, the tree is rebuilt. Built with a full-sweep SAH over
-the fat boxes, so a floor that spans the scene ends up alone near the root.
+It is a *dynamic AABB tree* (as in Box2D): a leaf's bounds start as the
+instance's exact world bounds; an instance that moves out of them gets a fat
+box, its bounds grown by a margin (:data:`FAT_MARGIN` of its extent on every
+side, see :func:`fatten`), and its path to the root is refitted (a few rows).
+A moving instance whose exact bounds stay inside its fat box changes nothing
+here (its exact bounds are on its instance row, which the kernel tests after
+the leaf); when many leave at once, or the instance set changes, the tree is
+rebuilt. Static instances keep tight leaves, so a ray walks no more of the
+tree than their boxes need. Built with a full-sweep SAH over the leaves'
+boxes, so a floor that spans the scene ends up alone near the root.
 Node bounds are float32 rounded outward (and a parent's are the union of its
 children's stored bounds), so every precision may traverse them.
 
@@ -41,9 +43,6 @@ from engine.layout import TLAS_NODE_DTYPE
 
 #: A leaf's fat box: the exact bounds grown by this fraction of their largest extent on every side.
 FAT_MARGIN = 0.1
-#: Nodes over at most this many instances split at the median of the widest centroid axis (one sort,
-#: a fifth of the SAH sweep's time: 1,000 instances build in about 30 ms instead of 100).
-SAH_MIN_ROWS = 16
 #: Rebuild instead of refitting when more than this fraction of the instances left their fat boxes at once.
 REBUILD_FRACTION = 0.125
 #: A space tree's fat boxes also grow by this fraction of (1 + their largest coordinate): far above the float32
@@ -81,22 +80,21 @@ def _half_area(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def _sah_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
-    """An order of boxes ``lo``/``hi`` (n >= 2) and k: the split into [:k], [k:] of least surface-area cost."""
+    """An order of boxes ``lo``/``hi`` (n >= 2) and k: the split into [:k], [k:] of least surface-area cost.
+
+    The three axes' sweeps run as one array operation (a node's cost is then a few NumPy calls, whatever its
+    size), so every node gets the SAH split: a median split of small nodes made the walk 3-15 % slower."""
     n = len(lo)
-    centre = lo + hi
-    best_cost, best_order, best_k = np.inf, np.arange(n), n // 2
-    for axis in range(3):
-        order = np.argsort(centre[:, axis], kind="stable")
-        slo, shi = lo[order], hi[order]
-        left = _half_area(np.minimum.accumulate(slo, axis=0), np.maximum.accumulate(shi, axis=0))[:-1]
-        right = _half_area(
-            np.minimum.accumulate(slo[::-1], axis=0)[::-1], np.maximum.accumulate(shi[::-1], axis=0)[::-1]
-        )[1:]
-        k = np.arange(1, n)
-        cost = left * k + right * (n - k)
-        i = int(np.argmin(cost))
-        if cost[i] < best_cost:
-            best_cost, best_order, best_k = float(cost[i]), order, i + 1
+    orders = np.argsort(lo + hi, axis=0, kind="stable").T  # (3, n): the boxes by centre along each axis
+    slo, shi = lo[orders], hi[orders]
+    left = _half_area(np.minimum.accumulate(slo, axis=1), np.maximum.accumulate(shi, axis=1))[:, :-1]
+    right = _half_area(
+        np.minimum.accumulate(slo[:, ::-1], axis=1)[:, ::-1], np.maximum.accumulate(shi[:, ::-1], axis=1)[:, ::-1]
+    )[:, 1:]
+    k = np.arange(1, n)
+    cost = left * k + right * (n - k)
+    axis, i = divmod(int(np.argmin(cost)), n - 1)  # the first least cost, axes in order x, y, z
+    best_cost, best_order, best_k = float(cost[axis, i]), orders[axis], i + 1
     # One more candidate a centroid sweep cannot make: the largest box alone (a floor whose centre lies
     # among the others' centres on every axis would otherwise stay in a subtree with small boxes).
     big = int(np.argmax(_half_area(lo, hi)))
@@ -105,13 +103,6 @@ def _sah_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
     if alone < best_cost:
         best_order, best_k = np.concatenate([[big], rest]), 1
     return best_order, best_k
-
-
-def _median_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
-    """An order of boxes (n >= 2) along their widest centroid axis, split in half."""
-    centre = lo + hi
-    axis = int(np.argmax(centre.max(axis=0) - centre.min(axis=0)))
-    return np.argsort(centre[:, axis], kind="stable"), len(lo) // 2
 
 
 @dataclass
@@ -144,10 +135,14 @@ class AabbTree:
 
     @classmethod
     def build(cls, lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN, slack: float = 0.0) -> AabbTree:
-        """A tree over rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0."""
+        """A tree over rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0.
+
+        The leaves start tight (grown by ``slack`` only): fat boxes of every instance overlap their neighbours'
+        and made the walk over a level of many small instances a quarter slower; an instance gets its fat
+        box (``margin``) the first time it moves out of its leaf (:meth:`update`)."""
         lo = np.asarray(lo, np.float64).reshape(-1, 3)
         hi = np.asarray(hi, np.float64).reshape(-1, 3)
-        fat_lo, fat_hi = fatten(lo, hi, margin, slack)
+        fat_lo, fat_hi = fatten(lo, hi, 0.0, slack)
         empty = np.zeros(0, np.int64)
         tree = cls(np.zeros(1, TLAS_NODE_DTYPE), fat_lo, fat_hi, empty, empty, margin, slack)
         tree._build()
@@ -174,10 +169,7 @@ class AabbTree:
                 nodes["count"][node] = 1
                 self.leaf[rows[0]] = node
                 continue
-            if len(rows) > SAH_MIN_ROWS:
-                order, k = _sah_split(self.fat_lo[rows], self.fat_hi[rows])
-            else:
-                order, k = _median_split(self.fat_lo[rows], self.fat_hi[rows])
+            order, k = _sah_split(self.fat_lo[rows], self.fat_hi[rows])
             child = next_free
             next_free += 2
             nodes["first"][node] = child
@@ -254,12 +246,14 @@ class AabbTree:
 
     def translate(self, delta: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         """The packed origin moved by ``delta`` (every coordinate minus ``delta``); ``lo``/``hi`` are the new
-        exact bounds of every row. Keeps the tree's shape; fat boxes that no longer hold their instance
-        (rounding) are grown again."""
+        exact bounds of every row. Keeps the tree's shape; boxes that no longer hold their instance (rounding)
+        grow just enough to hold it again, so tight leaves stay tight."""
         self.fat_lo = self.fat_lo - delta
         self.fat_hi = self.fat_hi - delta
         out = self._outside(np.arange(len(self.fat_lo)), lo, hi)
-        self.fat_lo[out], self.fat_hi[out] = fatten(lo[out], hi[out], self.margin, self.slack)
+        need_lo, need_hi = fatten(lo[out], hi[out], 0.0, self.slack)
+        self.fat_lo[out] = np.minimum(self.fat_lo[out], need_lo)
+        self.fat_hi[out] = np.maximum(self.fat_hi[out], need_hi)
         if len(self.leaf):
             self._refit_all()
 

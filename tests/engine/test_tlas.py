@@ -19,7 +19,7 @@ from engine.layout import TLAS_NODE_DTYPE
 from engine.packed import TableUpdate
 from engine.packing import ScenePacker
 from engine.scene import Scene
-from engine.tlas import FAT_MARGIN, AabbTree
+from engine.tlas import FAT_MARGIN, AabbTree, collect
 
 
 def random_bounds(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -80,9 +80,28 @@ def test_a_floor_spanning_the_scene_sits_near_the_root() -> None:
     assert tree.parent[floor_leaf] == 0
 
 
-def test_fat_boxes_grow_each_axis_by_the_margin() -> None:
+def test_small_nodes_split_by_surface_area_not_at_the_median() -> None:
+    """Seven boxes, two at one end of a street and five at the other: the SAH keeps the two apart (a median
+    split would put a far box with them, and a ray near them would walk both ends)."""
+    x = np.array([0.0, 1.0, 100.0, 101.0, 102.0, 103.0, 104.0])
+    lo = np.column_stack([x, np.zeros(7), np.zeros(7)])
+    hi = lo + 0.5
+    tree = AabbTree.build(lo, hi)
+    check_tree(tree, lo, hi)
+    first = int(tree.nodes["first"][0])
+    halves = [sorted(collect(tree.nodes, child, lambda a, b: True)) for child in (first, first + 1)]
+    assert sorted(halves) == [[0, 1], [2, 3, 4, 5, 6]]
+
+
+def test_leaves_start_tight_and_a_moved_instance_gets_a_fat_box() -> None:
+    """Static instances keep their exact boxes (a ray walks no more than they need); the first move out of
+    one gives that instance alone a fat box, each axis grown by the margin."""
     lo, hi = np.array([[0.0, 0.0, 0.0], [0.0, 5.0, 0.0]]), np.array([[2.0, 1.0, 4.0], [40.0, 5.0, 40.0]])
     tree = AabbTree.build(lo, hi)
+    np.testing.assert_array_equal(tree.fat_lo, lo)
+    np.testing.assert_array_equal(tree.fat_hi, hi)
+    lo, hi = lo + 0.5, hi + 0.5
+    tree.update([0, 1], lo, hi)  # both escape: a rebuild, over the new fat boxes
     np.testing.assert_allclose(tree.fat_hi[0] - hi[0], FAT_MARGIN * np.array([2.0, 1.0, 4.0]))
     # A plane's thin axis grows by a tenth of its width's margin, not by nothing (and not by its width).
     np.testing.assert_allclose(tree.fat_hi[1] - hi[1], FAT_MARGIN * np.array([40.0, 4.0, 40.0]))
@@ -91,6 +110,9 @@ def test_fat_boxes_grow_each_axis_by_the_margin() -> None:
 def test_update_inside_the_fat_box_changes_nothing_outside_refits_the_path() -> None:
     lo, hi = random_bounds(64)
     tree = AabbTree.build(lo, hi)
+    lo[5] += 1e-3
+    hi[5] += 1e-3
+    assert tree.update([5], lo[5:6], hi[5:6])  # out of its tight leaf: now a fat one
     before = tree.nodes.copy()
     nudge = 0.5 * np.min(tree.fat_hi[5] - hi[5])
     assert tree.update([5], lo[5:6] + nudge, hi[5:6] + nudge) == []
@@ -107,7 +129,7 @@ def test_update_inside_the_fat_box_changes_nothing_outside_refits_the_path() -> 
     )
     assert set(differs) <= set(changed)
     check_tree(tree, lo, hi)
-    assert tree.refits == 1 and tree.rebuilds == 1
+    assert tree.refits == 2 and tree.rebuilds == 1
 
 
 def test_many_escaping_at_once_rebuild() -> None:
@@ -172,6 +194,10 @@ def test_packer_small_move_one_instance_row_large_move_a_few_tree_rows() -> None
     packer.sync(scene)
     packed_tree_is_valid(packer)
     row = packer._instance_row[scene.entity("box7")]
+    move(scene, "box7", (0.01, 0.0, 0.0))  # out of its tight leaf: the leaf becomes fat, its path refitted
+    updates = packer.sync(scene)
+    assert updates[0] == TableUpdate("instances", range(row, row + 1))
+    assert {u.table for u in updates[1:]} == {"tlas_nodes"} and all(u.rows is not None for u in updates[1:])
     move(scene, "box7", (0.01, 0.0, 0.0))
     assert packer.sync(scene) == [TableUpdate("instances", range(row, row + 1))]
     move(scene, "box7", (5.0, 0.0, 0.0))
