@@ -184,9 +184,9 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     real3 sigma_hi = cam.sigma_max.xyz;
 #endif
 #if HAS_ABERRATIONS
-    /* The transition into the camera's box. */
-    /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
-     * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
+    /* The transition into the camera's box, the same for every ray unless the camera is near a face (the
+     * host's camera_box): no box needs no transition at all, and the per-ray look-up runs only where rays may
+     * disagree. */
     int camera_box = cam.size.z;
     if (camera_box != -1) {
         int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
@@ -203,29 +203,42 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     /* Each leg's events, found once: here for the first leg, after each crossing for the next. */
     LegEvents ev = leg_events(SCENE_PASS ray, cam.lens.z);
 #endif
-    /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
+    /* Each pass of the event loop searches one leg for a mesh and either ends the ray or counts an event, so
+     * MAX_EVENTS + 1 passes always suffice. A leg that ends on a portal or box face leaves that event to cross
+     * (pending) at the start of the next pass: the crossings come first and the loop's test last, because
+     * llvmpipe runs a loop's whole body masked while any lane is in it, and a body that ended the ray mid-way
+     * would run the crossing code once more for nothing. */
+    bool pending = false;
+    int kind = EVENT_NONE;
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
-#if HAS_SPACE && SPACE_WALK
-        /* The legs the host's clearances prove free of meshes, crossed in a loop without the mesh search's code:
-         * a ray through a view-filling box takes its two events here and one pass of the event loop, not three
-         * (llvmpipe runs a loop's body masked for every lane while any lane needs it). The first leg that needs
-         * a search, a ray out of events or one with no event left goes on to the event loop. */
-        for (int step = 0; step < MAX_EVENTS; ++step) {
-            if (ev.search || ray.n >= max_events) {
-                break;
-            }
-            MeshHit none;
-            none.t = ev.t_cut;
-            none.bary = R3S(0.0f);
-            none.instance = -1;
-            none.triangle = -1;
-            int kind = leg_event_kind(ev, none, ray.o_len);
-            if (kind == EVENT_NONE) {
-                break;
-            }
+#if HAS_SPACE
+#if SPACE_WALK
+        /* The pending event, then the legs the host's clearances prove free of meshes, crossed without the mesh
+         * search's code: a ray through a view-filling box takes its two events here and one pass, not three. */
+        MeshHit none;
+        none.t = REAL_MAX;
+        none.bary = R3S(0.0f);
+        none.instance = -1;
+        none.triangle = -1;
+        bool walk = pending;
+        if (!pending) {
+            kind = leg_event_kind(ev, none, ray.o_len);
+            walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
+        }
+        if (walk) {
+            do {
+                ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
+                ev = leg_events(SCENE_PASS ray, cam.lens.z);
+                kind = leg_event_kind(ev, none, ray.o_len);
+                walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
+            } while (walk);
+        }
+#else
+        if (pending) {
             ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
             ev = leg_events(SCENE_PASS ray, cam.lens.z);
         }
+#endif
 #endif
         if (ray.n >= max_events) {
             px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
@@ -250,22 +263,18 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
             mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
         }
 #if HAS_SPACE
-        int kind = leg_event_kind(ev, mesh, ray.o_len);
+        kind = leg_event_kind(ev, mesh, ray.o_len);
 #else
-        int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
+        kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
 #endif
-        /* 2. Nothing: background. A mesh: shade, stop. */
-        if (kind == EVENT_NONE) {
-            break;
-        }
+        /* 2. Nothing: background. A mesh: shade, stop (after the loop). 3-4. A box face or portal: pending. */
         if (kind == EVENT_MESH) {
-            hit = mesh; /* shaded after the loop */
+            hit = mesh;
+        }
+        pending = kind == EVENT_ABERRATION || kind == EVENT_PORTAL;
+        if (!pending) {
             break;
         }
-#if HAS_SPACE
-        ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
-        ev = leg_events(SCENE_PASS ray, cam.lens.z);
-#endif
     }
     /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
      * code masked on every pass. */
