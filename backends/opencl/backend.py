@@ -372,10 +372,6 @@ class OpenClBackend(shared.UploadedScene, Backend):
             # -11 %, ten-boxes-portals -5 %), with boxes it gains (64 and 1,024 boxes behind a wall +7-9 %,
             # ten-boxes-aberration +2 %).
             CAMERA_CLEAR_SEARCH=int(bool(features.aberration_modes)),
-            # The mesh-free legs crossed in their own loop (journey.h) pay on llvmpipe's masked lanes, not on
-            # PoCL's scalar work-items (interleaved A/B, CPU time, 400x400: ten-boxes-aberration +2 %,
-            # ten-boxes-portals +4 % with it).
-            SPACE_WALK=0,
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
             **self._space,

@@ -64,8 +64,8 @@
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); 0 for A/B only
  *   SPACE_WALK         1: the legs those clearances prove free of meshes are crossed in a loop of their
- *                      own before each mesh search (journey.h; GLSL: llvmpipe runs a loop's body masked
- *                      for all its lanes); 0: one pass of the event loop per leg (OpenCL)
+ *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
+ *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
  *
  * Entry point (journey.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
