@@ -67,6 +67,9 @@
  *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); 0 for A/B only
+ *   SPACE_WALK         1: the legs those clearances prove free of meshes are crossed in a loop of their
+ *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
+ *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
  *
  * Entry point (journey.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
@@ -142,6 +145,9 @@
 #endif
 #ifndef CAMERA_CLEAR_SEARCH
 #define CAMERA_CLEAR_SEARCH 1
+#endif
+#ifndef SPACE_WALK
+#define SPACE_WALK 1
 #endif
 #ifndef HAS_RADIAL
 #define HAS_RADIAL 0

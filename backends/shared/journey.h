@@ -69,6 +69,112 @@ FORCE_INLINE Ray enter_box(SCENE_DECL Ray ray, real t, int next, real3 lo, real3
 }
 #endif
 
+#if HAS_SPACE
+/* What one pass of the event loop finds on the ray's current leg before any mesh search: the nearest
+ * portal and box face past t_min, where the mesh search stops (t_cut) and whether it can be skipped. */
+STRUCT_BEGIN(LegEvents)
+#if HAS_PORTALS
+    Event portal;
+#endif
+#if HAS_ABERRATIONS
+    Event face;
+#endif
+    real t_min;
+    real t_cut;
+    bool search;
+STRUCT_END(LegEvents)
+
+/* 1. The nearest linked portal quad and box face past the point the ray leaves (t_from along the leg) by
+ * t_min, skipping the surface it leaves; the mesh search's limit and whether the host's clearances prove
+ * it empty. */
+FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray, real camera_clearance)
+{
+    LegEvents ev;
+    ev.t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
+    ev.t_cut = REAL_MAX;
+    ev.search = true;
+#if HAS_PORTALS
+    ev.portal = nearest_portal(SCENE_PASS ray.o, ray.r, ev.t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
+    ev.t_cut = ev.portal.t;
+#endif
+#if HAS_ABERRATIONS
+    ev.face = nearest_box_face(SCENE_PASS ray.o, ray.r, ev.t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
+    if (ev.face.t < REAL_MAX) {
+        real tie = tie_window(ray.o_len, ev.face.t);
+        ev.t_cut = min(ev.t_cut, ev.face.t + tie);
+        /* Inside a box whose clearance to every instance exceeds the search's reach past its exit (the
+         * tie window, twice over for rounding), no mesh can be hit: no search (section 14). */
+        ev.search = !(ev.face.clear > REAL(2.0f) * tie * ray.r_len);
+    }
+#endif
+#if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH
+    /* The first leg (no event yet) starts at the camera: a search that ends (with the tie window for
+     * rounding) nearer than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
+    if (ray.n == 0 && (ev.t_cut + REAL(2.0f) * tie_window(ray.o_len, ev.t_cut)) * ray.r_len < camera_clearance) {
+        ev.search = false;
+    }
+#endif
+    return ev;
+}
+
+/* The event of a leg: candidates within the tie window of the nearest are tied: portal, then mesh, then box
+ * face; EVENT_NONE for none. */
+FORCE_INLINE int leg_event_kind(LegEvents ev, MeshHit mesh, real o_len)
+{
+    int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
+    real nearest = mesh.instance >= 0 ? mesh.t : REAL_MAX;
+#if HAS_PORTALS
+    nearest = min(nearest, ev.portal.t);
+#endif
+#if HAS_ABERRATIONS
+    nearest = min(nearest, ev.face.t);
+#endif
+    if (nearest < REAL_MAX) {
+        real limit = nearest + tie_window(o_len, nearest);
+#if HAS_ABERRATIONS
+        if (ev.face.t <= limit) {
+            kind = EVENT_ABERRATION;
+        }
+#endif
+        if (mesh.instance >= 0 && mesh.t <= limit) {
+            kind = EVENT_MESH;
+        }
+#if HAS_PORTALS
+        if (ev.portal.t <= limit) {
+            kind = EVENT_PORTAL;
+        }
+#endif
+    }
+    return kind;
+}
+
+/* Across a portal or box face event (kind): the event counted, the ray on its next leg. */
+FORCE_INLINE Ray cross_event(SCENE_DECL Ray ray, int kind, LegEvents ev, real3 sigma_lo, real3 sigma_hi)
+{
+    ray.n += 1;
+#if HAS_PORTALS
+    /* 4. A portal: teleport through X, then the active box at the arrival. */
+    if (kind == EVENT_PORTAL) {
+        ray = teleport(SCENE_PASS ray, ev.portal.row, ev.portal.t);
+#if HAS_ABERRATIONS
+        ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)), sigma_lo,
+                        sigma_hi);
+#endif
+    }
+#endif
+#if HAS_ABERRATIONS
+    /* 3. A box face: the ray stays on the face, leaving it; the active box just past it. */
+    if (kind == EVENT_ABERRATION) {
+        ray = enter_box(SCENE_PASS ray, ev.face.t,
+                        box_after_face(SCENE_PASS ray.o, ray.r, ray.o_len, ray.r_len, ev.face), sigma_lo, sigma_hi);
+        ray.leaving_kind = EVENT_ABERRATION;
+        ray.leaving = ev.face.row;
+    }
+#endif
+    return ray;
+}
+#endif
+
 /* How a journey ends (Journey.end): a mesh hit, the sky, out of events, or a shadow ray's reach covered. */
 #define END_MESH 0
 #define END_MISS 1
@@ -88,7 +194,8 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
 {
     Journey trip;
     trip.end = END_MISS;
-#if HAS_ABERRATIONS
+#if HAS_SPACE
+    /* The radial mode's bounds from the camera's corner rays. */
     real3 sigma_lo = cam.sigma_min.xyz;
     real3 sigma_hi = cam.sigma_max.xyz;
 #endif
@@ -98,44 +205,68 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
     hit.instance = -1;
     hit.triangle = -1;
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
-    /* Each pass either ends the ray or counts an event, so MAX_EVENTS + 1 passes always suffice. */
+#if HAS_SPACE
+    /* Each leg's events, found once: here for the first leg, after each crossing for the next. */
+    LegEvents ev = leg_events(SCENE_PASS ray, clear);
+#endif
+    /* Each pass of the event loop searches one leg for a mesh and either ends the ray or counts an event, so
+     * MAX_EVENTS + 1 passes always suffice. A leg that ends on a portal or box face leaves that event to cross
+     * (pending) at the start of the next pass: the crossings come first and the loop's test last, because
+     * llvmpipe runs a loop's whole body masked while any lane is in it, and a body that ended the ray mid-way
+     * would run the crossing code once more for nothing. */
+    bool pending = false;
+    int kind = EVENT_NONE;
     for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
+#if HAS_SPACE
+#if SPACE_WALK
+        /* The pending event, then the legs the host's clearances prove free of meshes, crossed without the mesh
+         * search's code: a ray through a view-filling box takes its two events here and one pass, not three. */
+        MeshHit none;
+        none.t = REAL_MAX;
+        none.bary = R3S(0.0f);
+        none.instance = -1;
+        none.triangle = -1;
+        bool walk = pending;
+        if (!pending) {
+            kind = leg_event_kind(ev, none, ray.o_len);
+            walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
+        }
+#if HAS_SHADOWS
+        /* A shadow ray with a reach checks it at every event (below): no walk. */
+        walk = walk && !(reach < REAL_MAX);
+#endif
+        if (walk) {
+            do {
+                ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
+                ev = leg_events(SCENE_PASS ray, clear);
+                kind = leg_event_kind(ev, none, ray.o_len);
+                walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
+            } while (walk);
+        }
+#else
+        if (pending) {
+            ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
+            ev = leg_events(SCENE_PASS ray, clear);
+        }
+#endif
+#endif
         if (ray.n >= max_events) {
             trip.end = END_LIMIT;
             break;
         }
-        /* 1. The nearest of: a linked portal quad, a box face, a mesh triangle, past the point the ray
-         * leaves (t_from along the leg) by t_min, skipping the surface it leaves. */
+#if HAS_SPACE
+        real t_min = ev.t_min;
+        real t_cut = ev.t_cut;
+        bool search = ev.search;
+#else
         real t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
         real t_cut = REAL_MAX;
-#if HAS_PORTALS
-        Event portal = nearest_portal(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
-        t_cut = portal.t;
-#endif
-#if HAS_ABERRATIONS
-        Event face = nearest_box_face(SCENE_PASS ray.o, ray.r, t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
-        bool search = true;
-        if (face.t < REAL_MAX) {
-            real tie = tie_window(ray.o_len, face.t);
-            t_cut = min(t_cut, face.t + tie);
-            /* Inside a box whose clearance to every instance exceeds the search's reach past its exit (the
-             * tie window, twice over for rounding), no mesh can be hit: no search (section 14). */
-            search = !(face.clear > REAL(2.0f) * tie * ray.r_len);
-        }
-#else
         bool search = true;
 #endif
 #if HAS_SHADOWS
         /* A shadow ray's mesh search ends at its reach: a mesh past it does not block it. */
         if (reach < REAL_MAX) {
             t_cut = min(t_cut, (reach - ray.L) / ray.r_len);
-        }
-#endif
-#if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH && HAS_SPACE
-        /* The first leg starts at the camera: a search that ends (with the tie window for rounding) nearer
-         * than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
-        if (pass == 0 && (t_cut + REAL(2.0f) * tie_window(ray.o_len, t_cut)) * ray.r_len < clear) {
-            search = false;
         }
 #endif
         /* The mesh search stops where a mesh can no longer win. */
@@ -147,42 +278,20 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         if (search) {
             mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
         }
-        int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
 #if HAS_SPACE
-        /* Candidates within the tie window of the nearest are tied: portal, then mesh, then box face. */
-        real nearest = mesh.instance >= 0 ? mesh.t : REAL_MAX;
-#if HAS_PORTALS
-        nearest = min(nearest, portal.t);
-#endif
-#if HAS_ABERRATIONS
-        nearest = min(nearest, face.t);
-#endif
-        if (nearest < REAL_MAX) {
-            real limit = nearest + tie_window(ray.o_len, nearest);
-#if HAS_ABERRATIONS
-            if (face.t <= limit) {
-                kind = EVENT_ABERRATION;
-            }
-#endif
-            if (mesh.instance >= 0 && mesh.t <= limit) {
-                kind = EVENT_MESH;
-            }
-#if HAS_PORTALS
-            if (portal.t <= limit) {
-                kind = EVENT_PORTAL;
-            }
-#endif
-        }
+        kind = leg_event_kind(ev, mesh, ray.o_len);
+#else
+        kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
 #endif
 #if HAS_SHADOWS
         /* A shadow ray whose next event (or the sky) lies at or past its reach got there unblocked. */
         if (reach < REAL_MAX) {
             real t_event = kind == EVENT_MESH ? mesh.t : REAL_MAX;
 #if HAS_PORTALS
-            t_event = kind == EVENT_PORTAL ? portal.t : t_event;
+            t_event = kind == EVENT_PORTAL ? ev.portal.t : t_event;
 #endif
 #if HAS_ABERRATIONS
-            t_event = kind == EVENT_ABERRATION ? face.t : t_event;
+            t_event = kind == EVENT_ABERRATION ? ev.face.t : t_event;
 #endif
             if (kind == EVENT_NONE || ray.L + t_event * ray.r_len >= reach) {
                 trip.end = END_REACHED;
@@ -190,35 +299,15 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
             }
         }
 #endif
-        /* 2. Nothing: background. A mesh: shade, stop. */
-        if (kind == EVENT_NONE) {
-            break;
-        }
+        /* 2. Nothing: background. A mesh: shade, stop (after the journey). 3-4. A box face or portal: pending. */
         if (kind == EVENT_MESH) {
-            hit = mesh; /* shaded after the loop */
+            hit = mesh;
             trip.end = END_MESH;
+        }
+        pending = kind == EVENT_ABERRATION || kind == EVENT_PORTAL;
+        if (!pending) {
             break;
         }
-        ray.n += 1;
-#if HAS_PORTALS
-        /* 4. A portal: teleport through X, then the active box at the arrival. */
-        if (kind == EVENT_PORTAL) {
-            ray = teleport(SCENE_PASS ray, portal.row, portal.t);
-#if HAS_ABERRATIONS
-            ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)), sigma_lo,
-                            sigma_hi);
-#endif
-        }
-#endif
-#if HAS_ABERRATIONS
-        /* 3. A box face: the ray stays on the face, leaving it; the active box just past it. */
-        if (kind == EVENT_ABERRATION) {
-            ray = enter_box(SCENE_PASS ray, face.t, box_after_face(SCENE_PASS ray.o, ray.r, ray.o_len, ray.r_len, face),
-                            sigma_lo, sigma_hi);
-            ray.leaving_kind = EVENT_ABERRATION;
-            ray.leaving = face.row;
-        }
-#endif
     }
     trip.ray = ray;
     trip.hit = hit;
