@@ -298,9 +298,7 @@ PORTAL = Record(
 CAMERA = Record(
     "Camera",
     (
-        *_vectors(
-            "real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens", "subpixel"
-        ),
+        *_vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens", "subpixel"),
         Field("size", "int4"),
     ),
 )
