@@ -66,6 +66,15 @@ def parse_size(text: str) -> tuple[int, int]:
     return width, height
 
 
+def parse_spp(value: int) -> int:
+    """``--spp`` checked before anything is opened: samples a pixel, 1 to MAX_SPP."""
+    from backends.samples import MAX_SPP
+
+    if not 1 <= value <= MAX_SPP:
+        raise UsageError(f"--spp (samples per pixel) must lie in [1, {MAX_SPP}]; got {value}")
+    return value
+
+
 def _check_output(option: str, path: Path) -> None:
     """Fail before rendering when ``path`` cannot be written (so no render time is wasted).
 
@@ -108,6 +117,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.workers is not None or args.scheduler is not None:
         raise UsageError("--workers and --scheduler spread a flythrough's frames; add --path")
     width, height = parse_size(args.size)
+    spp = parse_spp(args.spp)
     out = Path(args.out or "frame.png")
     _check_output("--out", out)
     npz = Path(args.aovs) if args.aovs else None
@@ -121,7 +131,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     def render(backend: Backend) -> tuple[Frame, float]:
         check_frame_memory(backend, (width, height), aovs, "leave out --aovs" if npz is not None else "")
         start = time.perf_counter()
-        frame = render_once(scene, backend, (width, height), aovs)
+        frame = render_once(scene, backend, (width, height), aovs, spp=spp)
         return frame, (time.perf_counter() - start) * 1e3
 
     try:
@@ -136,7 +146,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     render_ms = frame.timings_ms.get("render")
     detail = f" (render {render_ms:.1f} ms)" if render_ms is not None else ""
-    print(f"{width}x{height} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
+    samples = f", {spp} samples a pixel" if spp > 1 else ""
+    print(f"{width}x{height}{samples} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
     return 0
 
 
@@ -156,9 +167,12 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     if args.aovs:
         raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
     width, height = parse_size(args.size)
+    spp = parse_spp(args.spp)
     out = Path(args.out or "flythrough.gif")
     check_output(out)
     _check_cluster_args(args)
+    if spp > 1 and (args.workers is not None or args.scheduler is not None):
+        raise UsageError("--spp renders a flythrough here; a cluster's frames take one sample a pixel")
     level = open_level(args.scene)
     scene = level.scene
     if args.workers is not None or args.scheduler is not None:
@@ -167,7 +181,7 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     def render(backend: Backend) -> float:
         check_frame_memory(backend, (width, height), ("color",), "")
         start = time.perf_counter()
-        render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps)
+        render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps, spp=spp)
         return time.perf_counter() - start
 
     try:
@@ -296,6 +310,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
         repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
         command=" ".join([PROG, *(args.argv or [])]), jobs=args.jobs, time_limit_s=args.time_limit,
+        spp=parse_spp(args.spp),
     )  # fmt: skip
     if args.workers is not None or args.scheduler is not None:
         return bench_command(config, workers=args.workers, scheduler=args.scheduler)
@@ -386,6 +401,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--precision", choices=("f32", "f64"), default=None, help="tracing precision")
     render.add_argument("--size", default="800x600", help="WIDTHxHEIGHT in pixels (default 800x600)")
     render.add_argument(
+        "--spp", type=int, default=1, metavar="N", help="samples per pixel, 1-256: anti-aliased colour (default 1)"
+    )
+    render.add_argument(
         "--out", default=None, help="colour image to write (default frame.png); with --path: .mp4, .gif or a folder"
     )
     render.add_argument(
@@ -445,6 +463,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--size", default=None, help="WIDTHxHEIGHT (default 800x800; --quick 96x72)")
     bench.add_argument("--repeat", type=int, default=None, help="timed frames per cell (default 5; --quick 3)")
+    bench.add_argument(
+        "--spp", type=int, default=1, metavar="N", help="samples per pixel of the timed frames, 1-256 (default 1)"
+    )
     bench.add_argument("--out", default="out/bench", help="folder for report.md, results.json, speed_vs_error.png")
     bench.add_argument("--quick", action="store_true", help="small sizes, few scenes and sweeps (under two minutes)")
     bench.add_argument(
@@ -452,7 +473,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SWEEP",
-        help="all, none, or: precision max_events size leaf workgroup tables local_size",
+        help="all, none, or: precision max_events size leaf workgroup tables local_size spp",
     )
     bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
     bench.add_argument(

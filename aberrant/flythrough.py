@@ -37,6 +37,7 @@ import numpy as np
 from aberrant.progress import Progress
 from aberrant.sinks import Sink, check_fps, check_gif_memory, check_output
 from backends.base import Backend
+from backends.samples import check_spp
 from components import Camera, Transform
 from engine.errors import AberrantError
 from engine.input import NoInput
@@ -102,6 +103,7 @@ def render_flythrough(
     fps: float | None = None,
     progress: TextIO | bool = True,
     on_frame: Callable[[int, App], None] | None = None,
+    spp: int = 1,
 ) -> int:
     """Walk ``path`` through ``scene`` with the real systems, rendering ``frames`` frames to ``out``.
 
@@ -109,7 +111,8 @@ def render_flythrough(
     (within [1, 60]); :func:`plan_frames` chooses both from a frame rate.
     ``progress``: True for a bar on stderr, False for none, or a stream.
     ``on_frame(index, app)`` runs after each tick (tests, overlays). The
-    scene's camera is moved (it ends where the walk ends). Returns the frames written.
+    scene's camera is moved (it ends where the walk ends). ``spp``: samples a pixel of every frame.
+    Returns the frames written.
     """
     frames, fps = plan_frames(path, fps=fps, frames=frames)
     out_path = Path(out)
@@ -121,7 +124,7 @@ def render_flythrough(
     sink = Sink(out_path, kind, fps)
     bar = progress_bar(progress, frames)
     try:
-        with PoseRenderer(scene, backend, poses, size) as renderer:
+        with PoseRenderer(scene, backend, poses, size, spp=spp) as renderer:
             for index in range(frames):
                 rgb = renderer.render(index)
                 if on_frame is not None:
@@ -178,16 +181,19 @@ class PoseRenderer:
     frames are asked for in.
     """
 
-    def __init__(self, scene: Scene, backend: Backend, poses: Sequence[Transform], size: Sequence[int]) -> None:
+    def __init__(
+        self, scene: Scene, backend: Backend, poses: Sequence[Transform], size: Sequence[int], *, spp: int = 1
+    ) -> None:
         if scene.camera_entity is None:
             raise AberrantError("the scene has no camera to fly")
         self.scene, self.backend, self.poses, self.size = scene, backend, list(poses), size
+        self.spp = check_spp(spp)
         self.camera = scene.camera_entity
         self.app = self._new_app()
         self.followed = -1  # the last pose the uploader has followed
 
     def _new_app(self) -> App:
-        return App(self.scene, self.backend, size=self.size, aovs=("color",), input_source=NoInput())
+        return App(self.scene, self.backend, size=self.size, aovs=("color",), input_source=NoInput(), spp=self.spp)
 
     def render(self, index: int) -> np.ndarray:
         """Frame ``index`` as (H, W, 3) uint8 RGB."""

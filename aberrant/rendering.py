@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 from typing import SupportsIndex, cast
 
 from backends.base import AOVS, Backend, Frame, create_backend
+from backends.samples import check_spp
 from engine.errors import AberrantError
 from engine.layout import Precision
 from engine.scene import Scene
@@ -39,6 +40,7 @@ def render(
     aovs: Sequence[str] | str = AOVS,
     *,
     precision: Precision | None = None,
+    spp: int = 1,
     log: Callable[[str], object] | None = None,
 ) -> Frame:
     """Render one frame of ``scene`` from its camera; the frame's AOVs are numpy arrays.
@@ -52,6 +54,7 @@ def render(
     chose (to stderr, or to ``log``). A backend opened here is released before
     this returns.
     ``aovs`` names the outputs to trace (one name or several; see ``AOVS``).
+    ``spp`` samples a pixel (1 to 256) anti-alias the colour; the other AOVs come from the pixel centre.
 
     >>> import aberrant
     >>> scene = aberrant.build_demo("starter")
@@ -61,6 +64,7 @@ def render(
     >>> scene.close()
     """
     width, height = _frame_size(size)  # before a backend is opened, so a bad size costs nothing
+    spp = check_spp(spp)
     names = (aovs,) if isinstance(aovs, str) else tuple(aovs)
     if isinstance(backend, Backend):
         if precision is not None and precision != backend.precision:
@@ -68,9 +72,9 @@ def render(
                 f"precision {precision!r} is for a backend render() opens; the {backend.name} backend given "
                 f"traces at {backend.precision}"
             )
-        return render_once(scene, backend, (width, height), names)
+        return render_once(scene, backend, (width, height), names, spp=spp)
     opened = create_backend(backend, precision=precision, fallback=False, log=log)
     try:
-        return render_once(scene, opened, (width, height), names)
+        return render_once(scene, opened, (width, height), names, spp=spp)
     finally:
         opened.release()

@@ -4,7 +4,9 @@ A backend that cannot start, or cannot trace the scene, never takes the
 editor down: the reason is kept in :attr:`BackendHost.error`, shown in the
 backend panel and status bar, and the viewport falls back to the raster
 preview. Edit-mode frames are rendered only when the scene, the view or the
-size changed, so an idle editor does not keep a slow CPU tracer busy.
+size changed, so an idle editor does not keep a slow CPU tracer busy; while
+nothing changes, a few more samples a pixel refine the still image (up to
+STILL_SPP), then the tracer rests.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from backends.base import BACKENDS, Backend, Frame, backend_class, create_backend, probe
+from backends.samples import ColorAccumulator, sample_camera
 from backends.upload import SceneUploader
 from engine.camera_view import CameraView
 from engine.layout import Precision
@@ -27,6 +30,8 @@ if TYPE_CHECKING:
 
 #: Frames kept for the frame-time plot.
 HISTORY = 240
+#: Samples a pixel a still edit-mode view accumulates, one more each editor frame (moving: one).
+STILL_SPP = 16
 
 
 class BackendHost:
@@ -48,6 +53,8 @@ class BackendHost:
         self._key: tuple[Any, ...] | None = None
         self._texture: moderngl.Texture | None = None
         self.last_frame: Frame | None = None
+        #: The still view's samples so far (None: one sample, the frame as rendered).
+        self._samples: ColorAccumulator | None = None
 
     # --- choosing a backend ---------------------------------------------------------------
 
@@ -106,6 +113,7 @@ class BackendHost:
         """Forget what was uploaded (another scene ran on the backend, or the scene object changed)."""
         self._uploader = None
         self._key = None
+        self._samples = None
 
     # --- rendering -----------------------------------------------------------------------------
 
@@ -115,6 +123,8 @@ class BackendHost:
             return False
         key = (scene.world, scene.cursor, *view.position, *view.rotation.ravel(), view.fov_deg, size, id(self.backend))
         if key == self._key:
+            if self.error is None and self.samples < STILL_SPP:
+                self._refine(view, size)
             return self.error is None and self.texture is not None
         self._key = key
         try:
@@ -135,6 +145,46 @@ class BackendHost:
         self.present(frame, elapsed)
         return True
 
+    @property
+    def samples(self) -> int:
+        """Samples a pixel of the image shown (the window keeps drawing while it grows)."""
+        return 1 if self._samples is None else self._samples.samples
+
+    def _refine(self, view: CameraView, size: tuple[int, int]) -> None:
+        """Trace one more sample of the still view and show the mean of all so far."""
+        assert self.backend is not None
+        try:
+            if self._samples is None:
+                first = self.last_frame
+                if first is None:
+                    return
+                if first.color is None:  # drawn in place: the centre sample is in the backend's texture
+                    texture = getattr(self.backend, "color_texture", None)
+                    if texture is None:
+                        return
+                    color = np.frombuffer(texture.read(alignment=1), np.uint8).reshape(size[1], size[0], 4)
+                    first = Frame(size[0], size[1], color=color.copy())
+                self._samples = ColorAccumulator(first)
+            sample = self.backend.render(sample_camera(view, self._samples.samples), size[0], size[1], ("color",))
+            self._samples.add(sample.aov("color"))
+        except Exception as e:  # refining is a nicety: a failure keeps the image shown and says why once
+            self.log(f"{self.backend.name}: refining the still view: {e}")
+            self._samples = None
+            self._key = None
+            return
+        self._show(self._samples.mean())
+
+    def _show(self, color: np.ndarray) -> None:
+        """Write ``color`` (H, W, 4) into the editor's own texture."""
+        if self.ctx is None:
+            return
+        size = (color.shape[1], color.shape[0])
+        if self._texture is None or self._texture.size != size:
+            if self._texture is not None:
+                self._texture.release()
+            self._texture = self.ctx.texture(size, 4)
+        self._texture.write(np.ascontiguousarray(color).tobytes())
+
     def present(self, frame: Frame, elapsed_ms: float | None = None) -> None:
         """Record a frame (edit or play mode) for display and for the statistics."""
         ms = frame.timings_ms.get("render", elapsed_ms if elapsed_ms is not None else 0.0)
@@ -142,18 +192,14 @@ class BackendHost:
         self.mrays.append(frame.width * frame.height / max(ms, 1e-6) / 1e3)
         self.frames += 1
         self.last_frame = frame
-        if not self._draws_in_place and frame.color is not None and self.ctx is not None:
-            size = (frame.width, frame.height)
-            if self._texture is None or self._texture.size != size:
-                if self._texture is not None:
-                    self._texture.release()
-                self._texture = self.ctx.texture(size, 4)
-            self._texture.write(np.ascontiguousarray(frame.color).tobytes())
+        self._samples = None
+        if not self._draws_in_place and frame.color is not None:
+            self._show(frame.color)
 
     @property
     def texture(self) -> moderngl.Texture | None:
         """The latest frame as a texture, row 0 = the image's top row."""
-        if self._draws_in_place:
+        if self._draws_in_place and self._samples is None:
             return getattr(self.backend, "color_texture", None)
         return self._texture
 

@@ -298,14 +298,14 @@ class EditorWindow:
             count += 1
             last = frames is not None and count >= frames
             self.watch_disk()
-            before = (self.events, self.host.frames, self.preview.renders)
+            before = (self.events, self.host.frames, self.host.samples, self.preview.renders)
             if not self.busy:
                 self.glfw.wait_events_timeout(self.idle_wait_s)
                 if self.events == before[0] and not last:
                     self.still_frames += 1
                     continue
             self.frame(screenshot if last else None)
-            still = before == (self.events, self.host.frames, self.preview.renders)
+            still = before == (self.events, self.host.frames, self.host.samples, self.preview.renders)
             self.still_frames = self.still_frames + 1 if still else 0
             if last:
                 break

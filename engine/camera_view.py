@@ -27,6 +27,9 @@ class CameraView:
     position: np.ndarray  # (3,)
     rotation: np.ndarray  # (3, 3): columns are right, up, back
     fov_deg: float
+    #: Where in its pixel each primary ray starts, (x right, y down) in [0, 1): the centre for one sample a
+    #: pixel, another point for each further sample (``backends.samples``).
+    subpixel: tuple[float, float] = (0.5, 0.5)
 
     @staticmethod
     def from_components(transform: Transform, camera: Camera) -> CameraView:
@@ -54,8 +57,9 @@ class CameraView:
         """
         aspect = width / height
         t = math.tan(math.radians(self.fov_deg) / 2.0)
-        x = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * aspect * t
-        y = (1.0 - 2.0 * (np.arange(height) + 0.5) / height) * t
+        sx, sy = self.subpixel
+        x = (2.0 * (np.arange(width) + sx) / width - 1.0) * aspect * t
+        y = (1.0 - 2.0 * (np.arange(height) + sy) / height) * t
         if rows is not None:
             y = y[rows[0] : rows[1]]
         local = np.empty((len(y), width, 3))
@@ -188,4 +192,5 @@ def pack_camera(
         camera_clearance(view.position - origin, bounds),
     )
     row["size"][0, :3] = (width, height, camera_box(view.position - origin, aberrations, tree))
+    row["subpixel"][0, :2] = view.subpixel
     return row

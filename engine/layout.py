@@ -310,11 +310,12 @@ PORTAL = Record(
 #: world-space checkers); ``sigma_min``/``sigma_max`` are the radial mode's corner-ray bounds m_k, M_k;
 #: ``lens = (tan(fov/2), aspect, clearance, 0)``, the camera's distance to every instance's bounds
 #: (``box_clearance``); ``size = (width, height, camera box, 0)``, the camera box being every primary
-#: ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``).
+#: ray's active box or -2 for a per-ray look-up (``camera_view.camera_box``); ``subpixel = (x, y, 0, 0)`` is
+#: where in its pixel each primary ray starts (0.5, 0.5 the centre; another point for one more sample).
 CAMERA = Record(
     "Camera",
     (
-        *_vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens"),
+        *_vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens", "subpixel"),
         Field("size", "int4"),
     ),
 )

@@ -47,6 +47,7 @@ class App:
         aovs: Sequence[str] = AOVS,
         input_source: InputSource | None = None,
         sprint_multiplier: float = SPRINT_MULTIPLIER,
+        spp: int = 1,
     ) -> None:
         self.scene = scene
         self.backend = backend
@@ -68,7 +69,7 @@ class App:
         ]
         if backend is not None:
             self.upload = GpuUploadProcessor(scene, backend, self.upload_stats)
-            self.render = RenderProcessor(scene, backend, self.frame_slot, _size(size), aovs)
+            self.render = RenderProcessor(scene, backend, self.frame_slot, _size(size), aovs, spp)
             registered += [(self.upload, Priority.GPU_UPLOAD), (self.render, Priority.RENDER)]
         scene.activate()
         for processor, _ in registered:
@@ -169,10 +170,11 @@ class App:
 
 
 def render_once(
-    scene: Scene, backend: Backend, size: Sequence[int] = DEFAULT_SIZE, aovs: Sequence[str] = AOVS
+    scene: Scene, backend: Backend, size: Sequence[int] = DEFAULT_SIZE, aovs: Sequence[str] = AOVS, *, spp: int = 1
 ) -> Frame:
-    """Upload and render one frame of ``scene`` as it stands (one tick, ``dt = 0``, no input)."""
-    with App(scene, backend, size=size, aovs=aovs, input_source=NoInput()) as app:
+    """Upload and render one frame of ``scene`` as it stands (one tick, ``dt = 0``, no input), ``spp``
+    samples a pixel."""
+    with App(scene, backend, size=size, aovs=aovs, input_source=NoInput(), spp=spp) as app:
         frame = app.tick(0.0)
     assert frame is not None
     return frame

@@ -11,13 +11,14 @@ from collections.abc import Sequence
 import esper
 
 from backends.base import AOVS, Backend
+from backends.samples import check_spp, render_samples
 from engine.camera_view import scene_camera
 from engine.scene import Scene
 from systems.state import FrameSlot
 
 
 class RenderProcessor(esper.Processor):
-    """Calls the backend once per tick; ``size`` and ``aovs`` may change between ticks (window resize)."""
+    """Renders once per tick; ``size``, ``aovs`` and ``spp`` (samples a pixel) may change between ticks."""
 
     def __init__(
         self,
@@ -26,14 +27,16 @@ class RenderProcessor(esper.Processor):
         slot: FrameSlot,
         size: tuple[int, int],
         aovs: Sequence[str] = AOVS,
+        spp: int = 1,
     ) -> None:
         self.scene = scene
         self.backend = backend
         self.slot = slot
         self.size = size
         self.aovs = tuple(aovs)
+        self.spp = check_spp(spp)
 
     def process(self, dt: float) -> None:
         width, height = self.size
-        self.slot.frame = self.backend.render(scene_camera(self.scene), width, height, self.aovs)
+        self.slot.frame = render_samples(self.backend, scene_camera(self.scene), width, height, self.aovs, self.spp)
         self.slot.frames += 1

@@ -17,10 +17,11 @@ from typing import Any
 
 import numpy as np
 
-from aberrant.bench.metrics import Timing, compare
-from aberrant.bench.reference import ReferenceCache
-from aberrant.bench.sweeps import Setting
+from aberrant.bench.metrics import Timing, color_error, compare
+from aberrant.bench.reference import ReferenceCache, scene_key
+from aberrant.bench.sweeps import TARGET_SPP, Setting
 from backends.base import AOVS, Backend, backend_class, probe
+from backends.samples import render_samples
 from backends.upload import SceneUploader
 from components import Mesh, Transform
 from engine.bvh import BvhParams, build_bvh
@@ -49,11 +50,14 @@ def describe_updates(packed: PackedScene, updates: list[TableUpdate]) -> list[st
 class CellRunner:
     """Measures cells; remembers per run what is costly to learn twice (probes, BVH build times)."""
 
-    def __init__(self, references: ReferenceCache, repeat: int) -> None:
+    def __init__(self, references: ReferenceCache, repeat: int, image_errors: bool = False) -> None:
         self.references = references
         self.repeat = repeat
+        #: Whether base cells measure their colour's error too (the spp sweep's cells always do).
+        self.image_errors = image_errors
         self._probes: dict[str, str | None] = {}
         self._bvh_ms: dict[tuple[str, int], float] = {}
+        self._targets: dict[tuple[str, str], np.ndarray] = {}
 
     def probe(self, backend: str) -> str | None:
         if backend not in self._probes:
@@ -141,7 +145,8 @@ class CellRunner:
             row["upload_bytes"] = sent.nbytes
             row["upload_ms"] = sent.upload_ms
             start = time.perf_counter()
-            frame = backend.render(camera, width, height, AOVS)  # compiles the variant: reported apart
+            spp = setting.spp
+            frame = render_samples(backend, camera, width, height, AOVS, spp)  # compiles the variant: apart
             row["first_frame_ms"] = _ms(start)
             reference = self.references.get(scene, camera, size)
             row["reference_ms"] = reference.render_ms
@@ -149,20 +154,22 @@ class CellRunner:
             errors = compare(frame.aov("instance"), frame.aov("depth"), frame.aov("perceived"), reference.aovs)
             row["errors"] = errors.as_dict()
             row["coverage"] = float((reference.aovs["instance"] >= 0).mean())
+            if setting.sweep == "spp" or (setting.sweep == "" and (self.image_errors or spp > 1)):
+                row["image_errors"] = self._image_errors(backend, scene, camera, setting, size, frame.aov("color"))
             reference_backend = setting.backend == "reference"
             if not reference_backend:  # the timed variant (colour only) compiles here, not in a timed frame
                 backend.render(camera, width, height, TIMED_AOVS)
             samples = []
             for _ in range(1 if reference_backend else self.repeat):
                 start = time.perf_counter()
-                backend.render(camera, width, height, TIMED_AOVS)
+                render_samples(backend, camera, width, height, TIMED_AOVS, spp)
                 samples.append(_ms(start))
             timing = Timing.of(samples)
             row["frame"] = timing.as_dict()
             row["mrays_per_s"] = timing.mrays_per_s(width * height)
 
             def timed_frame() -> object:
-                return backend.render(camera, width, height, TIMED_AOVS)
+                return render_samples(backend, camera, width, height, TIMED_AOVS, spp)
 
             if pair is not None:
                 row["embree_paired"] = self._paired(pair, timed_frame)
@@ -171,6 +178,34 @@ class CellRunner:
             self._ticks(scene, camera, uploader, row)
         finally:
             backend.release()
+
+    def _image_errors(
+        self,
+        backend: Backend,
+        scene: Scene,
+        camera: CameraView,
+        setting: Setting,
+        size: tuple[int, int],
+        color: np.ndarray,
+    ) -> dict[str, float | int]:
+        """The colour's error against TARGET_SPP samples a pixel of this backend and of the reference.
+
+        The backend's own target is rendered once per scene and backend family in a run (it is the same
+        for every point of the spp sweep); the reference's is cached on disk like every reference frame.
+        """
+        key = (scene_key(scene, camera, size), f"{setting.family} leaf={setting.leaf} {setting.options}")
+        if key not in self._targets:
+            own = render_samples(backend, camera, size[0], size[1], ("color",), TARGET_SPP)
+            self._targets[key] = own.aov("color")
+        truth = self.references.get(scene, camera, size, TARGET_SPP).aovs["color"]
+        own_error, ref_error = color_error(color, self._targets[key]), color_error(color, truth)
+        return {
+            "target_spp": TARGET_SPP,
+            "own_mae": own_error["mae"],
+            "own_psnr": own_error["psnr"],
+            "ref_mae": ref_error["mae"],
+            "ref_psnr": ref_error["psnr"],
+        }
 
     def _paired(self, other: Callable[[], object], frame: Callable[[], object]) -> dict[str, float]:
         """``other``'s time over the frame's (``ratio``) and its inverse: medians of per-pair ratios."""

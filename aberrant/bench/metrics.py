@@ -87,6 +87,16 @@ def compare(
     return Errors(mismatch, depth_median, depth_p99, perceived_median, perceived_p99, nan, int(same.sum()))
 
 
+def color_error(color: np.ndarray, target: np.ndarray) -> dict[str, float]:
+    """Mean absolute error (0..255 levels) and PSNR (dB; +inf when equal) of an image's RGB against a target's."""
+    if color.shape != target.shape:
+        raise ValueError(f"colour images differ in shape: {color.shape} vs {target.shape}")
+    diff = color[..., :3].astype(np.float64) - target[..., :3].astype(np.float64)
+    mse = float(np.mean(diff * diff)) if diff.size else 0.0
+    psnr = 10.0 * math.log10(255.0**2 / mse) if mse > 0 else math.inf
+    return {"mae": float(np.mean(np.abs(diff))) if diff.size else 0.0, "psnr": psnr}
+
+
 @dataclass(frozen=True)
 class Timing:
     """Frame times of the timed runs (milliseconds)."""

@@ -4,8 +4,10 @@ and ``space_count.png``: the space-count sweep's paired ratios against N.
 Each point is one setting summarised over the scenes that every compared
 setting traced (geometric mean of frame times, so no one big scene
 dominates; mean of the errors), so points are comparable. Two panels: the
-instance-id mismatch and the 99th-percentile relative depth error. Zero
-errors (the reference, most f64 rows) sit on the panel's floor, labelled.
+instance-id mismatch and the 99th-percentile relative depth error; a third,
+the colour's mean absolute error against the reference's many-sample image,
+when the cells measured it (the spp sweep). Zero errors (the reference, most
+f64 rows) sit on the panel's floor, labelled.
 Without matplotlib (the ``bench`` extra) the PNG is a notice drawn with
 Pillow, and the report says so.
 """
@@ -31,9 +33,11 @@ SWEEP_COLORS: dict[str, str] = {
     "workgroup": "#9467bd",
     "tables": "#8c564b",
     "local_size": "#e377c2",
+    "spp": "#17becf",
 }
 MISMATCH_FLOOR_PCT = 1e-4
 DEPTH_FLOOR = 1e-16
+COLOR_FLOOR = 1e-2
 
 
 def _value(x: float | None) -> float:
@@ -50,6 +54,13 @@ class Point:
     time_ms: float
     mismatch_pct: float
     depth_p99: float
+    color_mae: float = math.nan  # levels of 255 against the reference's many-sample image; NaN: not measured
+
+
+def _color_mae(rows: list[dict[str, Any]]) -> float:
+    """The mean of the rows' colour error against the reference's many-sample image (NaN if one lacks it)."""
+    values = [_value((r.get("image_errors") or {}).get("ref_mae")) for r in rows]
+    return sum(values) / len(values) if values else math.nan
 
 
 def points(results: dict[str, Any]) -> tuple[list[Point], list[str]]:
@@ -87,6 +98,7 @@ def points(results: dict[str, Any]) -> tuple[list[Point], list[str]]:
                 geometric_mean([r["frame"]["median_ms"] for r in chosen]),
                 100 * sum(_value(r["errors"]["mismatch"]) for r in chosen) / len(chosen),
                 sum(_value(r["errors"]["depth_p99"]) for r in chosen) / len(chosen),
+                _color_mae(chosen),
             )
         )
     anchors = []
@@ -125,6 +137,8 @@ def _order(setting: dict[str, Any], sweep: str) -> float:
         return math.inf if shape is None else float(shape[0] * shape[1])
     if sweep == "tables":
         return float(options.get("tables", "auto") != "auto")
+    if sweep == "spp":
+        return float(setting.get("spp", 1))
     return float(setting["precision"] != "f32")
 
 
@@ -171,11 +185,13 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
     from matplotlib.ticker import FuncFormatter
 
     pts, common = points(results)
-    fig, axes = plt.subplots(1, 2, figsize=(14, 6), dpi=110)
     panels = [
         ("mismatch_pct", "instance-id mismatch (% of pixels, symlog)", MISMATCH_FLOOR_PCT),
         ("depth_p99", "depth relative error, 99th percentile (log)", DEPTH_FLOOR),
     ]
+    if any(math.isfinite(p.color_mae) for p in pts):
+        panels.append(("color_mae", "colour error vs the reference's 64-spp image (MAE, levels; log)", COLOR_FLOOR))
+    fig, axes = plt.subplots(1, len(panels), figsize=(7 * len(panels), 6), dpi=110)
     for ax, (attr, ylabel, floor) in zip(axes, panels, strict=True):
 
         def y_of(p: Point, attr: str = attr, floor: float = floor) -> float:
@@ -241,6 +257,10 @@ def _matplotlib_png(results: dict[str, Any]) -> bytes:
                 va="bottom",
                 transform=ax.get_yaxis_transform(),  # x in axes units: at the left edge whatever the data
             )
+        elif attr == "color_mae":
+            ax.set_yscale("log")
+            top = max((p.color_mae for p in pts if math.isfinite(p.color_mae)), default=1.0)
+            ax.set_ylim(floor / 3, max(1.0, 3 * top))
         else:
             ax.set_yscale("log")
             # Limits before the threshold line: with no points, autoscaling to the line alone would collapse.

@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from backends.base import AOVS
+from backends.samples import render_samples
 from backends.upload import SceneUploader
 from engine.camera_view import CameraView, scene_camera
 from engine.scene import Scene
@@ -61,8 +62,8 @@ def _source_hash() -> str:
     return h.hexdigest()
 
 
-def scene_key(scene: Scene, camera: CameraView, size: tuple[int, int]) -> str:
-    """The cache key of one reference frame (hex SHA-256)."""
+def scene_key(scene: Scene, camera: CameraView, size: tuple[int, int], spp: int = 1) -> str:
+    """The cache key of one reference frame of ``spp`` samples a pixel (hex SHA-256)."""
     doc = scene_document(scene, Path("/"))
     for name, spec in doc["assets"].items():
         if "path" in spec:
@@ -73,6 +74,8 @@ def scene_key(scene: Scene, camera: CameraView, size: tuple[int, int]) -> str:
     h.update(np.asarray(camera.position, np.float64).tobytes())
     h.update(np.asarray(camera.rotation, np.float64).tobytes())
     h.update(f";fov={camera.fov_deg!r};size={size[0]}x{size[1]};".encode())
+    if spp != 1:  # one sample a pixel keeps the key it always had
+        h.update(f"spp={spp};".encode())
     h.update(_source_hash().encode())
     return h.hexdigest()
 
@@ -87,14 +90,17 @@ class ReferenceFrame:
     key: str
 
 
-def render_reference(scene: Scene, camera: CameraView, size: tuple[int, int]) -> tuple[dict[str, np.ndarray], float]:
-    """Render every AOV with the float64 reference tracer; returns them and the milliseconds taken."""
+def render_reference(
+    scene: Scene, camera: CameraView, size: tuple[int, int], spp: int = 1
+) -> tuple[dict[str, np.ndarray], float]:
+    """Render every AOV with the float64 reference tracer (the colour of ``spp`` samples a pixel); returns
+    them and the milliseconds taken."""
     from backends.reference.backend import ReferenceBackend
 
     start = time.perf_counter()
     with ReferenceBackend() as backend:
         SceneUploader(backend).sync(scene, camera.position)
-        frame = backend.render(camera, size[0], size[1], AOVS)
+        frame = render_samples(backend, camera, size[0], size[1], AOVS, spp)
     return {name: frame.aov(name) for name in AOVS}, (time.perf_counter() - start) * 1e3
 
 
@@ -135,9 +141,10 @@ class ReferenceCache:
         self.hits = 0
         self.misses = 0
 
-    def get(self, scene: Scene, camera: CameraView, size: tuple[int, int]) -> ReferenceFrame:
-        """The reference frame of ``scene`` from ``camera`` at ``size``, rendered only when not cached."""
-        key = scene_key(scene, camera, size)
+    def get(self, scene: Scene, camera: CameraView, size: tuple[int, int], spp: int = 1) -> ReferenceFrame:
+        """The reference frame of ``scene`` from ``camera`` at ``size`` and ``spp``, rendered only when not
+        cached."""
+        key = scene_key(scene, camera, size, spp)
         if key in self._memory:
             return self._memory[key]
         path = self.folder / f"{key}.npz"
@@ -146,7 +153,7 @@ class ReferenceCache:
             self.hits += 1
         else:
             self.misses += 1
-            aovs, ms = render_reference(scene, camera, size)
+            aovs, ms = render_reference(scene, camera, size, spp)
             frame = ReferenceFrame(aovs, ms, False, key)
             _save(path, frame)
         self._memory[key] = frame

@@ -2,7 +2,8 @@
 
 Targets first (each measured figure beside its goal), then the headline
 matrix (scene x backend, Mrays/s and the ratio to Embree), the plot, the
-engine and non-Euclidean overheads, the Embree anchor, every cell in detail,
+engine and non-Euclidean overheads, the Embree anchor, the image error of
+samples a pixel, every cell in detail,
 what could not run and why, and what was swept.
 """
 
@@ -13,6 +14,7 @@ from collections import defaultdict
 from typing import Any
 
 from aberrant.bench.embree import MODES
+from aberrant.bench.images import image_section
 from aberrant.bench.markdown import markdown_table
 from aberrant.bench.paired import hotel_section, space_section
 from aberrant.bench.sweeps import SWEEPS
@@ -386,6 +388,7 @@ def render_report(results: dict[str, Any]) -> str:
         *hotel_section(results),
         *_overhead(results),
         *_embree(results),
+        *image_section(results),
     ]
     lines += _detail(results) + _problems(results) + _swept(results)
     return "\n".join(lines).rstrip() + "\n"

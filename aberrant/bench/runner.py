@@ -33,6 +33,7 @@ from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
 from aberrant.progress import Progress
 from backends.base import BACKENDS, backend_class
+from backends.samples import check_spp
 from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -64,6 +65,8 @@ class BenchConfig:
     #: Seconds after which the scenes not yet begun are skipped (their rows say so), so a run on borrowed
     #: time still writes its report; ``None``: no limit.
     time_limit_s: float | None = None
+    #: Samples a pixel of every setting but the spp sweep's own points.
+    spp: int = 1
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -76,6 +79,7 @@ class BenchConfig:
             "command": self.command,
             "jobs": self.jobs,
             "time_limit_s": self.time_limit_s,
+            "spp": self.spp,
         }
 
 
@@ -97,6 +101,7 @@ def make_config(
     command: str = "",
     jobs: int = 1,
     time_limit_s: float | None = None,
+    spp: int = 1,
 ) -> BenchConfig:
     """Check every argument before anything runs.
 
@@ -131,6 +136,7 @@ def make_config(
         command,
         jobs,
         time_limit_s,
+        check_spp(spp),
     )
 
 
@@ -147,8 +153,13 @@ def plan(config: BenchConfig) -> list[Setting]:
     out: list[Setting] = []
     for name in config.backends:
         precisions = list(backend_class(name).precisions)
-        out += settings_for(name, precisions, config.sweeps, config.quick)
+        out += settings_for(name, precisions, config.sweeps, config.quick, config.spp)
     return out
+
+
+def image_errors(config: BenchConfig) -> bool:
+    """Whether the base cells measure their colour's error (when the spp sweep runs, or --spp is above 1)."""
+    return "spp" in config.sweeps or config.spp > 1
 
 
 def scene_cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
@@ -283,7 +294,7 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
     load_start = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
     settings = plan(config)
     refs = ReferenceCache()
-    cells = CellRunner(refs, config.repeat)
+    cells = CellRunner(refs, config.repeat, image_errors=image_errors(config))
     probes = {name: cells.probe(name) for name in config.backends}
     machine = machine_info(config.backends, probes)
     embree_reason = embree.available() if config.embree else "embree: disabled"

@@ -24,7 +24,16 @@ from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info
 from aberrant.bench.reference import ReferenceCache
-from aberrant.bench.runner import BenchConfig, document, measure_scene, overhead_row, plan, scene_cells, stamp
+from aberrant.bench.runner import (
+    BenchConfig,
+    document,
+    image_errors,
+    measure_scene,
+    overhead_row,
+    plan,
+    scene_cells,
+    stamp,
+)
 from aberrant.bench.scenes import SceneSpec
 from aberrant.bench.sweeps import Setting
 from aberrant.progress import Progress
@@ -53,7 +62,7 @@ def measure_group(spec: SceneSpec, config: BenchConfig, settings: list[Setting])
         span = {"start": time.time()}
         load_start = _load()
         refs = ReferenceCache()
-        cells = CellRunner(refs, config.repeat)
+        cells = CellRunner(refs, config.repeat, image_errors=image_errors(config))
         machine = machine_info(backends, {name: cells.probe(name) for name in backends})
         embree_reason = embree.available() if config.embree else "embree: disabled"
         anchor = embree.EmbreeAnchor(config.repeat) if embree_reason is None else None

@@ -10,7 +10,7 @@ the knobs; each sweep becomes one line on the plot.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from engine.errors import AberrantError
@@ -25,12 +25,14 @@ SWEEPS: dict[str, str] = {
     "workgroup": "GLSL compute work-group shape (local_size_x x local_size_y)",
     "tables": "GLSL table store: RGBA32UI images (the llvmpipe default) or storage buffers",
     "local_size": "OpenCL work-group (local) size; 'driver' lets the OpenCL driver choose",
+    "spp": "samples per pixel (anti-aliasing): frame time against the colour's error to a many-sample image",
+    # A lighting sweep (shadows on/off) is one more entry here and in BACKEND_SWEEPS, a Setting field like spp.
 }
 #: Which sweeps apply to which backend (the reference has no knobs but the frame's size).
 BACKEND_SWEEPS: dict[str, tuple[str, ...]] = {
-    "glsl": ("precision", "max_events", "size", "leaf", "workgroup", "tables"),
-    "opencl": ("precision", "max_events", "size", "leaf", "local_size"),
-    "reference": (),
+    "glsl": ("precision", "max_events", "size", "leaf", "workgroup", "tables", "spp"),
+    "opencl": ("precision", "max_events", "size", "leaf", "local_size", "spp"),
+    "reference": ("spp",),
 }
 QUICK_SWEEPS: tuple[str, ...] = ("precision", "max_events", "leaf")
 #: Values swept. Where a tuple lists the base value (first, or BASE_LEAF), it is the base setting itself; the
@@ -42,6 +44,9 @@ QUICK_MAX_EVENTS: tuple[int, ...] = (4,)
 WORKGROUPS: tuple[tuple[int, int], ...] = ((8, 8), (16, 16), (4, 4), (32, 4))
 TABLE_STORES: tuple[str, ...] = ("auto", "ssbo")
 LOCAL_SIZES: tuple[tuple[int, int] | None, ...] = ((16, 16), (8, 8), (32, 8), None)
+SAMPLE_COUNTS: tuple[int, ...] = (1, 2, 4, 8, 16)
+#: The many-sample images colour errors are measured against (the backend's own, and the reference's).
+TARGET_SPP = 64
 BASE_LEAF = 4
 
 
@@ -55,6 +60,7 @@ class Setting:
     leaf: int = BASE_LEAF
     max_events: int | None = None  # None: the scene's own
     size_divisor: int = 1  # the frame is --size divided by this on each side
+    spp: int = 1  # samples a pixel
     sweep: str = ""
     value: str = "base"
 
@@ -89,6 +95,7 @@ class Setting:
             "leaf": self.leaf,
             "max_events": self.max_events,
             "size_divisor": self.size_divisor,
+            "spp": self.spp,
             "sweep": self.sweep,
             "value": self.value,
             "label": self.label,
@@ -107,42 +114,37 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def settings_for(backend: str, precisions: Sequence[Precision], sweeps: Sequence[str], quick: bool) -> list[Setting]:
-    """The base setting of ``backend``, its other precisions, then each applicable sweep's other points."""
+def settings_for(
+    backend: str, precisions: Sequence[Precision], sweeps: Sequence[str], quick: bool, spp: int = 1
+) -> list[Setting]:
+    """The base setting of ``backend`` (``spp`` samples a pixel), its other precisions, then each applicable
+    sweep's other points."""
     allowed = BACKEND_SWEEPS.get(backend, ())
     base_precision = precisions[0]
-    out = [Setting(backend, base_precision)]
+    base = Setting(backend, base_precision, spp=spp)
+    out = [base]
     if "precision" in sweeps and "precision" in allowed:
-        out += [Setting(backend, p, sweep="precision", value=p) for p in precisions[1:]]
+        out += [replace(base, precision=p, sweep="precision", value=p) for p in precisions[1:]]
     chosen = [s for s in sweeps if s in allowed and s != "precision"]
     for sweep in chosen:
         if sweep == "max_events":
             out += [
-                Setting(backend, base_precision, max_events=m, sweep=sweep, value=str(m))
+                replace(base, max_events=m, sweep=sweep, value=str(m))
                 for m in (QUICK_MAX_EVENTS if quick else MAX_EVENTS)
             ]
+        elif sweep == "spp":
+            out += [replace(base, spp=n, sweep=sweep, value=str(n)) for n in SAMPLE_COUNTS if n != spp]
         elif sweep == "size":
-            out += [Setting(backend, base_precision, size_divisor=d, sweep=sweep, value=f"1/{d}") for d in (4, 2)]
+            out += [replace(base, size_divisor=d, sweep=sweep, value=f"1/{d}") for d in (4, 2)]
         elif sweep == "leaf":
             leaves = QUICK_LEAF_SIZES if quick else LEAF_SIZES
-            out += [
-                Setting(backend, base_precision, leaf=n, sweep=sweep, value=str(n)) for n in leaves if n != BASE_LEAF
-            ]
+            out += [replace(base, leaf=n, sweep=sweep, value=str(n)) for n in leaves if n != BASE_LEAF]
         elif sweep == "workgroup":
-            out += [
-                Setting(backend, base_precision, options=(("workgroup", w),), sweep=sweep, value=_fmt(w))
-                for w in WORKGROUPS[1:]
-            ]
+            out += [replace(base, options=(("workgroup", w),), sweep=sweep, value=_fmt(w)) for w in WORKGROUPS[1:]]
         elif sweep == "tables":
-            out += [
-                Setting(backend, base_precision, options=(("tables", t),), sweep=sweep, value=t)
-                for t in TABLE_STORES[1:]
-            ]
+            out += [replace(base, options=(("tables", t),), sweep=sweep, value=t) for t in TABLE_STORES[1:]]
         elif sweep == "local_size":
-            out += [
-                Setting(backend, base_precision, options=(("local_size", s),), sweep=sweep, value=_fmt(s))
-                for s in LOCAL_SIZES[1:]
-            ]
+            out += [replace(base, options=(("local_size", s),), sweep=sweep, value=_fmt(s)) for s in LOCAL_SIZES[1:]]
     return out
 
 

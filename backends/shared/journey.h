@@ -25,14 +25,15 @@ FORCE_INLINE Ray start_ray(real3 o, real3 d)
     return ray;
 }
 
-/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"): the camera-space
- * vector normalised, then rotated (never a difference of two world points). */
+/* The primary ray through pixel (i, j), row 0 = top (docs/semantics.md, "Primary rays"), at the point
+ * cam.subpixel.xy of the pixel (0.5 the centre): the camera-space vector normalised, then rotated (never a
+ * difference of two world points). */
 FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
 {
     real tan_half = cam.lens.x;
     real aspect = cam.lens.y;
-    real x = (REAL(2.0f) * (TO_REAL(i) + REAL(0.5f)) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
-    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + REAL(0.5f)) / TO_REAL(cam.size.y)) * tan_half;
+    real x = (REAL(2.0f) * (TO_REAL(i) + cam.subpixel.x) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
+    real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + cam.subpixel.y) / TO_REAL(cam.size.y)) * tan_half;
     real3 cam_dir = normalize(R3(x, y, -1.0f));
     real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
     return start_ray(cam.position.xyz, d);

@@ -73,6 +73,16 @@ def test_compare_uses_same_instance_hits_and_counts_nan():
     assert math.isnan(compare(instance, depth, None, ref).perceived_median)
 
 
+def test_color_error_is_mae_and_psnr_over_rgb():
+    target = np.zeros((2, 2, 4), np.uint8)
+    image = target.copy()
+    image[0, 0, :3] = 4  # alpha is not compared
+    image[..., 3] = 255
+    e = metrics.color_error(image, target)
+    assert e["mae"] == pytest.approx(1.0) and e["psnr"] == pytest.approx(10 * math.log10(255**2 / 4.0))
+    assert metrics.color_error(target, target) == {"mae": 0.0, "psnr": math.inf}
+
+
 def test_pareto_front_keeps_only_undominated_points():
     points = [(1.0, 5.0), (2.0, 3.0), (3.0, 4.0), (4.0, 1.0), (2.0, 3.0), (0.5, 9.0), (5.0, 1.0), (math.nan, 0.0)]
     assert pareto_front(points) == [5, 0, 1, 4, 3]
@@ -101,7 +111,10 @@ def test_sweeps_have_unique_labels_and_reject_unknown_names():
     settings = settings_for("glsl", ["f32", "f64"], check_sweeps(["all"]), quick=False)
     labels = [s.label for s in settings]
     assert len(labels) == len(set(labels)) and labels[0] == "glsl f32" and "glsl f64" in labels
-    assert {s.sweep for s in settings} >= {"precision", "leaf", "workgroup", "tables", "size", "max_events"}
+    assert {s.sweep for s in settings} >= {"precision", "leaf", "workgroup", "tables", "size", "max_events", "spp"}
+    at_four = settings_for("glsl", ["f32"], ["leaf", "spp"], quick=True, spp=4)
+    assert [s.spp for s in at_four if s.sweep != "spp"] == [4] * (1 + len([s for s in at_four if s.sweep == "leaf"]))
+    assert sorted(s.spp for s in at_four if s.sweep == "spp") == [1, 2, 8, 16]
     with pytest.raises(AberrantError, match="unknown sweep"):
         check_sweeps(["colour"])
 
@@ -154,6 +167,7 @@ def test_reference_cache_dir_follows_the_environment(monkeypatch, tmp_path):
         (["--sweeps", "colour"], "unknown sweep 'colour'"),
         (["--jobs", "0"], "--jobs must lie in"),
         (["--time-limit", "0"], "--time-limit must be positive"),
+        (["--spp", "0"], "--spp (samples per pixel) must lie in [1, 256]"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2(capsys, tmp_path, argv, message):
@@ -251,6 +265,25 @@ def test_jobs_render_every_reference_frame_before_measuring(monkeypatch, tmp_pat
     keys = {(r["max_events"], tuple(r["size"])) for r in results["rows"] if r["status"] == "ok"}
     assert len(keys) >= 3
     assert results["reference_cache"]["misses"] == 0 and results["reference_cache"]["hits"] == len(keys)
+
+
+def test_the_spp_sweep_measures_image_errors(monkeypatch, tmp_path):
+    """Each sample count's colour against 64 samples: its own backend's and the reference's, in report and plot."""
+    monkeypatch.setenv("ABERRANT_CACHE_DIR", str(tmp_path / "cache"))
+    config = make_config(scenes=["starter"], backends=["reference"], size=(24, 18), repeat=1, out=tmp_path,
+                         sweeps=["spp"], overhead=False)  # fmt: skip
+    results = run_bench(config, io.StringIO())
+    rows = {r["setting"]["spp"]: r for r in results["rows"]}
+    assert sorted(rows) == [1, 2, 4, 8, 16] and all(r["status"] == "ok" for r in rows.values())
+    errors = {n: r["image_errors"] for n, r in rows.items()}
+    assert all(e["target_spp"] == 64 and e["own_mae"] == e["ref_mae"] for e in errors.values())  # it is the reference
+    assert errors[16]["ref_mae"] < errors[4]["ref_mae"] < errors[1]["ref_mae"]
+    assert errors[16]["ref_psnr"] > errors[1]["ref_psnr"]
+    assert all(r["errors"]["mismatch"] == 0 for r in rows.values())  # the AOVs come from the pixel centre
+    assert all(math.isfinite(p.color_mae) for p in plot.points(results)[0] if p.backend != "embree")
+    write_outputs(results, tmp_path)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Image error: samples per pixel" in report and "| starter | reference f64 | 16 |" in report
 
 
 def test_a_run_past_its_time_limit_skips_the_rest_and_still_reports(tmp_path):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from components import Aberration, Portal, Transform
-from editor.backend_host import BackendHost
+from editor.backend_host import STILL_SPP, BackendHost
 from editor.gizmo import matrix_to_transform, transform_matrix
 from editor.model import EditorModel
 from editor.overlay import preview_lines, thick_lines
@@ -161,10 +161,13 @@ def test_backend_host_renders_only_on_change(backend_factory):
         assert host.render_view(model.scene, view, (16, 12))
         assert host.frames == 1 and host.last_frame.color.shape == (12, 16, 4) and host.mrays[-1] > 0
         host.render_view(model.scene, view, (16, 12))
-        assert host.frames == 1  # nothing changed: no new frame
+        assert host.frames == 1 and host.samples == 2  # nothing changed: no new frame, one more sample
+        for _ in range(2 * STILL_SPP):
+            host.render_view(model.scene, view, (16, 12))
+        assert host.frames == 1 and host.samples == STILL_SPP  # then the still view rests
         model.add_primitive("box")
         host.render_view(model.scene, view, (16, 12))
-        assert host.frames == 2
+        assert host.frames == 2 and host.samples == 1  # a change starts again from one sample
         assert not host.select("no-such-backend") and host.backend is None and "no-such-backend" in host.error
         assert not host.render_view(model.scene, view, (16, 12))
     finally:

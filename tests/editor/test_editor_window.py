@@ -23,6 +23,8 @@ pytest.importorskip("glfw", reason="the editor extra is not installed: pip insta
 
 from PIL import Image
 
+from editor.backend_host import STILL_SPP
+
 ROOT = Path(__file__).resolve().parents[2]
 ARTIFACTS = ROOT / "out" / "test-artifacts"
 SIZE = (1280, 800)
@@ -45,9 +47,13 @@ report = {
     "backend": host.name, "error": host.error, "traced": host.frames,
     "origin": list(ui.viewport.origin), "size": list(ui.viewport.size),
     "traced_size": [host.last_frame.width, host.last_frame.height] if host.last_frame else None,
+    "samples": host.samples,
 }
 if args["idle"]:
+    from editor.backend_host import STILL_SPP
     window.idle_wait_s = 0.2
+    window.run(frames=STILL_SPP)  # a still view first refines its image, one sample a pixel more a frame
+    report["refined"] = host.samples
     still = (host.frames, window.preview.renders)
     cpu = time.process_time()
     window.run(frames=args["idle"])
@@ -180,7 +186,9 @@ def test_editor_window_shows_the_glsl_texture(display):
     scene = build_demo("starter")
     backend = GlslBackend()
     try:
-        bare = render_once(scene, backend, tuple(report["size"]), ("color",)).color[..., :3].astype(int)
+        # The still view has refined its image with more samples a pixel: the same count, rendered at once.
+        spp = report["samples"]
+        bare = render_once(scene, backend, tuple(report["size"]), ("color",), spp=spp).color[..., :3].astype(int)
     finally:
         backend.release()
         scene.close()
@@ -213,11 +221,12 @@ def test_editor_window_play_then_stop(display):
 
 
 def test_a_still_editor_traces_once_and_sleeps(display):
-    """No input: the loop sleeps on the event queue and neither the tracer nor the preview draws again;
-    moving the camera traces once more."""
+    """No input: once the still view has its samples, the loop sleeps on the event queue and neither the
+    tracer nor the preview draws again; moving the camera traces once more."""
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     report = run_editor(display, ARTIFACTS / "editor_idle.png", overlays=True, backend="reference", frames=6, idle=10)
     assert report["traced"] >= 1 and report["error"] is None
+    assert report["refined"] == STILL_SPP
     traced, previewed, still = report["idle"]
     assert traced == 0 and previewed == 0 and still >= 10
     assert report["moved"] == [1, 1]

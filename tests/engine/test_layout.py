@@ -64,9 +64,10 @@ EXPECTED = {
             "sigma_min": 80,
             "sigma_max": 96,
             "lens": 112,
-            "size": 128,
+            "subpixel": 128,
+            "size": 144,
         },
-        144,
+        160,
     ),
     ("camera", "f64"): (
         {
@@ -78,9 +79,10 @@ EXPECTED = {
             "sigma_min": 160,
             "sigma_max": 192,
             "lens": 224,
-            "size": 256,
+            "subpixel": 256,
+            "size": 288,
         },
-        288,
+        320,
     ),
 }
 
