@@ -42,11 +42,30 @@ def struct(record: Record) -> str:
 
 def texel_reader(record: Record) -> str:
     """``<struct>_from_texels(img, b)``: the record whose first texel is ``b`` in an RGBA32UI image, one
-    texel per 32-bit 4-vector and ``R4_TEXELS_`` per ``real4`` (bindings.glsl's helpers)."""
+    texel per 32-bit 4-vector and ``R4_TEXELS_`` per ``real4`` (bindings.glsl's helpers).
+
+    Each member's texel offset is read from the record's dtype at both precisions, so the padding that
+    aligns a ``real4`` to 32 bytes at f64 is skipped as the packer wrote it."""
+    offsets = {}
+    for precision in ("f32", "f64"):
+        dtype = record.dtype(precision)
+        texels = []
+        for field in record.fields:
+            start = dtype.fields[field.name][1]
+            size = dtype.fields[field.name][0].itemsize // field.rows if field.rows > 1 else 0
+            texels += [(start + row * size) // 16 for row in range(field.rows)]
+        offsets[precision] = texels
     loads = []
     fixed = reals = 0
-    for kind, _ in record.kernel_members():
-        offset = " + ".join([*([str(fixed)] if fixed else []), *([f"{reals} * R4_TEXELS_"] if reals else [])])
+    for k, (kind, _) in enumerate(record.kernel_members()):
+        # f64 pads a real4 after an odd number of 16-byte vectors to 32 bytes: one texel more from there on
+        pads = offsets["f64"][k] - (fixed + 2 * reals)
+        if offsets["f32"][k] != fixed + reals:  # pragma: no cover - a Record this file cannot lay out
+            raise ValueError(f"{record.struct}: member {k} is not where the texel reader would look")
+        terms = [str(fixed)] if fixed else []
+        terms += [f"{reals} * R4_TEXELS_"] if reals else []
+        terms += [f"{pads} * (R4_TEXELS_ - 1)"] if pads else []
+        offset = " + ".join(terms)
         loads.append(f"{_TEXEL_READERS[kind]}(img, {f'(b) + {offset}' if offset else 'b'})")
         if kind == "real4":
             reals += 1

@@ -108,3 +108,23 @@ def test_texel_readers_step_by_vector_and_real_size() -> None:
         ("I4_AT_", "(b) + 5 * R4_TEXELS_"),
     ]
     assert "Bvh8Node_from_texels" not in text  # GLSL has no 8-vectors
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_texel_readers_skip_the_padding_before_a_real4_at_f64(precision: str) -> None:
+    """A real4 after an odd number of 16-byte vectors starts at the next 32 bytes at f64: its reader looks there."""
+    from backends.shared.layout_h import texel_reader
+
+    fields = [layout.Field(name, kind) for name, kind in zip("abcd", ("int4", "real4", "float4", "real4"), strict=True)]
+    record = layout.Record("Probe", tuple(fields))
+    r4_texels = 2 if precision == "f64" else 1
+    texels = []
+    for part in texel_reader(record).split("_AT_(img, ")[1:]:
+        depth, end = 0, 0
+        while depth >= 0:  # the argument runs to the parenthesis that closes the load
+            depth += {"(": 1, ")": -1}.get(part[end], 0)
+            end += 1
+        expression = part[: end - 1].replace("(b)", "0").replace("b", "0").replace("R4_TEXELS_", str(r4_texels))
+        texels.append(eval(expression))
+    dtype = record.dtype(precision)  # the packer's bytes
+    assert texels == [dtype.fields[name][1] // 16 for name in "abcd"]
