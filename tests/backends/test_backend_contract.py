@@ -225,10 +225,12 @@ def test_row_range_upload_writes_only_those_rows(fresh, fresh_options):
     packed = packer.packed
     assert packed is not None
     itemsize = packed.tables["instances"].dtype.itemsize
-    before = fresh.read_table("instances")
-    buffer = fresh._tables["instances"]
     entity = scene.entity("b")
     t = scene.get(entity, Transform)
+    scene.set(entity, replace(t, position=(0.01, 0.5, -1.01)))  # a first move: its tight TLAS leaf grows fat
+    fresh.upload(packed, packer.sync(scene))
+    before = fresh.read_table("instances")
+    buffer = fresh._tables["instances"]
     scene.set(entity, replace(t, position=(0.05, 0.5, -1.05)))  # within its fat TLAS leaf: one row
     updates = packer.sync(scene)
     row = int(np.flatnonzero(packed.instance_entities == entity)[0])
