@@ -35,7 +35,7 @@ def test_make_targets_parse(target):
 @needs_make
 def test_make_demo_renders_the_tunnels_image_and_flythrough():
     plan = run_make("-n", "demo").stdout
-    assert 'render aberration_tunnels --backend auto --size 800x600 --out "out/aberration_tunnels.png"' in plan
+    assert 'render aberration_tunnels --backend auto --size 800x600 --spp 4 --out "out/aberration_tunnels.png"' in plan
     assert '--path --duration 14 --fps 15 --out "out/aberration_tunnels.gif"' in plan
 
 

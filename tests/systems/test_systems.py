@@ -415,10 +415,15 @@ def test_static_tick_uploads_nothing_and_a_moved_entity_one_instance_row(make_sc
         assert app.last_updates == []
         assert len(backend.uploads) == 1  # a static tick does not call upload at all
 
-        scene.set(box, Transform((2.0, 0.05, 0.0)))  # within its fat TLAS leaf (a tenth of its size)
+        scene.set(box, Transform((2.0, 0.01, 0.0)))  # a first move: its tight TLAS leaf grows fat
         app.tick(0.1)
         assert app.packed is not None
         k = list(app.packed.instance_entities).index(box)
+        assert app.last_updates[0] == TableUpdate("instances", range(k, k + 1))
+        assert {u.table for u in app.last_updates} == {"instances", "tlas_nodes"}
+
+        scene.set(box, Transform((2.0, 0.05, 0.0)))  # within its fat TLAS leaf (a tenth of its size)
+        app.tick(0.1)
         assert app.last_updates == [TableUpdate("instances", range(k, k + 1))]
         assert app.last_upload_bytes == app.packed.tables["instances"].dtype.itemsize
         assert backend.uploads[-1] == app.last_updates
@@ -426,7 +431,7 @@ def test_static_tick_uploads_nothing_and_a_moved_entity_one_instance_row(make_sc
 
         app.tick(0.1)
         assert app.last_updates == [] and app.last_upload_bytes == 0
-        assert app.upload_stats.uploads == 2
+        assert app.upload_stats.uploads == 3
 
         scene.set(box, Transform((2.0, 1.0, 0.0)))  # out of it: the row and a few TLAS rows, no mesh data
         app.tick(0.1)
