@@ -48,11 +48,12 @@ def texel_reader(record: Record) -> str:
     aligns a ``real4`` to 32 bytes at f64 is skipped as the packer wrote it."""
     offsets = {}
     for precision in ("f32", "f64"):
-        dtype = record.dtype(precision)
+        members = record.dtype(precision).fields
+        assert members is not None  # a record's dtype is structured
         texels = []
         for field in record.fields:
-            start = dtype.fields[field.name][1]
-            size = dtype.fields[field.name][0].itemsize // field.rows if field.rows > 1 else 0
+            start = members[field.name][1]
+            size = members[field.name][0].itemsize // field.rows if field.rows > 1 else 0
             texels += [(start + row * size) // 16 for row in range(field.rows)]
         offsets[precision] = texels
     loads = []
