@@ -82,6 +82,9 @@ def build() -> Scene:
         settings=Settings(background=(0.55, 0.68, 0.85), light_dir=(0.45, 0.8, 0.55), max_events=16),
     )
     use_blocks(scene)
+    # A sun from the left, a little behind the start: the tunnels cast their shadows across the plaza, and
+    # the light that falls in at their mouths is squeezed or stretched with the space inside.
+    scene.add_light("sun", "sun", look_at=(0.7, -0.6, -0.25), color=(1.0, 0.96, 0.88), intensity=1.15)
     block(scene, "ground", (-24.0, -0.3, -26.0), (24.0, 0.0, 20.0), SAND, 1.0)
     block(scene, "back_wall", (-24.0, 0.0, -26.0), (24.0, 8.0, -25.0), SLATE, 1.0)
 

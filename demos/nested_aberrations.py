@@ -49,6 +49,10 @@ def build() -> Scene:
     """The colonnade, the runner coloured by the active box, and the three boxes."""
     scene = Scene("nested_aberrations", settings=Settings(background=(0.08, 0.09, 0.12), light_dir=(0.5, 0.75, 0.3)))
     use_blocks(scene)
+    # A low sun from the east, a little behind the start: the pillars' shadows lie across the floor, their
+    # widths squeezed and stretched with the space they fall in (a shadow ray bends at the boxes as a
+    # camera ray does).
+    scene.add_light("sun", "sun", look_at=(-0.72, -0.5, -0.48), color=(1.0, 0.95, 0.85), intensity=1.25)
     block(scene, "floor", (-6.0, -0.3, -46.0), (6.0, 0.0, 9.0), SAND, 1.0)
     block(scene, "back_wall", (-6.5, 0.0, -47.0), (6.5, 5.5, -46.0), CHALK, 1.0)
     for i in range(22):
