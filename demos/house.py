@@ -136,6 +136,11 @@ def gallery(scene: Scene) -> None:
             (hi[0], lo[1] + 2.6, z + 3.0),
             colors[-1 - i],
         )
+    # Two lamps down the gallery (no shadows: the sun's is the scene's one shadowing light); their range
+    # keeps them in the gallery, which no other room comes near.
+    for i, z in enumerate((lo[2] + 7.0, lo[2] + 19.0)):
+        scene.add_light(f"gallery_lamp_{i}", "point", position=(0.0, hi[1] - 1.0, z), color=(1.0, 0.9, 0.75),
+                        intensity=3.2, shadows=False, range=14.0)  # fmt: skip
     scene.add_mesh("gallery_plinth", "box", position=(0.0, lo[1] + 0.5, lo[2] + 1.5), scale=1.0, color=IVORY)
     scene.add_mesh("gallery_statue", "pyramid", position=(0.0, lo[1] + 1.6, lo[2] + 1.5), scale=1.2, color=GOLD)
 
@@ -150,6 +155,8 @@ def bedroom(scene: Scene) -> None:
     block(scene, "bed", (lo[0], lo[1], lo[2]), (lo[0] + 2.2, lo[1] + 0.6, lo[2] + 3.2), IVORY)
     block(scene, "pillow", (lo[0] + 0.2, lo[1] + 0.6, lo[2] + 0.2), (lo[0] + 2.0, lo[1] + 0.8, lo[2] + 0.8), SKY)
     block(scene, "table", (lo[0] + 2.5, lo[1], lo[2]), (lo[0] + 3.3, lo[1] + 0.7, lo[2] + 0.8), CLAY)
+    scene.add_light("bedroom_lamp_light", "point", position=(lo[0] + 2.9, lo[1] + 1.6, lo[2] + 0.9),
+                    color=(1.0, 0.85, 0.6), intensity=2.8, shadows=False, range=9.0)  # fmt: skip
     scene.add_mesh(
         "lamp", "sphere", smooth=True, position=(lo[0] + 2.9, lo[1] + 1.0, lo[2] + 0.4), scale=0.6, color=GOLD
     )

@@ -47,7 +47,7 @@ START_LOOK = (0.0, 1.0, -16.0)
 
 def build() -> Scene:
     """The colonnade, the runner coloured by the active box, and the three boxes."""
-    scene = Scene("nested_aberrations", settings=Settings(background=(0.08, 0.09, 0.12), light_dir=(0.5, 0.75, 0.3)))
+    scene = Scene("nested_aberrations", settings=Settings(background=(0.08, 0.09, 0.12), ambient=0.28))
     use_blocks(scene)
     # A low sun from the east, a little behind the start: the pillars' shadows lie across the floor, their
     # widths squeezed and stretched with the space they fall in (a shadow ray bends at the boxes as a

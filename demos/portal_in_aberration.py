@@ -74,9 +74,10 @@ def build() -> Scene:
     """The atrium, the squeezed hall, the garden, and the two portal pairs between their frames."""
     scene = Scene("portal_in_aberration", settings=Settings(background=SUNSET, light_dir=(0.45, 0.7, 0.55)))
     use_blocks(scene)
-    # The setting sun, low behind the garden's far hedge: it rims the fountain and the trees, which cast long
-    # shadows towards the gate; the atrium and the hall, roofed, are lit by the ambient light alone.
-    scene.add_light("sun", "sun", look_at=(0.35, -0.17, 0.92), color=(1.0, 0.72, 0.48), intensity=2.6)
+    # The setting sun, low behind the garden's far hedge, almost straight down the line of the doorways: it
+    # shines back through the gate, down the squeezed hall and out of the atrium's frame, a long warm patch
+    # on the floors of two roofed rooms (the fountain's column stands in it and casts a shadow through both).
+    scene.add_light("sun", "sun", look_at=(0.03, -0.185, 0.98), color=(1.0, 0.72, 0.48), intensity=2.0)
 
     # 1. The atrium: white walls, a stone floor, the first frame in the middle.
     room(scene, "atrium", (-5.0, 0.0, -6.0), (5.0, 3.6, 6.0), wall=CHALK, floor=SAND, ceiling=IVORY,

@@ -106,14 +106,15 @@ def stone(size: int = 128, rows: int = 4, seed: int = 13) -> np.ndarray:
     return _rgb(colour)
 
 
-def wallpaper(size: int = 128, stripes: int = 8) -> np.ndarray:
-    """Regency stripes: broad pale bands and narrow deeper ones, with a fine dotted line between."""
+def wallpaper(size: int = 128, count: int = 4) -> np.ndarray:
+    """A quiet damask: small diamonds on a lattice over a pale ground, the same either way up (box faces turn
+    their UVs differently, so a pattern with a direction would run sideways on some walls)."""
     y, x = np.mgrid[0:size, 0:size] / size
-    u = (x * stripes) % 1.0
-    band = np.where(u < 0.62, 1.0, 0.84)
-    dots = (np.abs(u - 0.66) < 0.025) & ((y * stripes * 4) % 1.0 < 0.5)
-    tone = np.where(dots, 0.74, band)
-    return _rgb(np.stack([tone, tone * 0.97, tone * 0.93], axis=-1))
+    u, v = (x * count) % 1.0 - 0.5, (y * count) % 1.0 - 0.5
+    diamond = np.abs(u) + np.abs(v) < 0.22
+    ring = np.abs(np.abs(u) + np.abs(v) - 0.42) < 0.03
+    tone = np.where(diamond, 0.84, np.where(ring, 0.9, 1.0))
+    return _rgb(np.stack([tone, tone * 0.97, tone * 0.92], axis=-1))
 
 
 def grass(size: int = 128, seed: int = 17) -> np.ndarray:
