@@ -14,7 +14,8 @@ on the left, as its text says. What this level adds, so that the deformation
 shows: end walls closing the room, a world-space checker on every surface
 (the thesis mixed a checker texture into every box), a light tint per half,
 and the same props in each half (a sphere, a cube and a column), which look
-slim on the left and squat on the right. Radial boxes scale the camera's speed
+slim on the left and squat on the right. A lamp hangs in each half; the left
+one's shadows are squeezed with its space. Radial boxes scale the camera's speed
 along world axes too, so strafing across the left half is twice as fast.
 """
 

@@ -11,7 +11,8 @@ The thesis used its radial method; these boxes are ``metric`` instead, on
 purpose: its rule is the one the camera moves by (docs/semantics.md, "Aberrations"), so the
 perceived length of a tunnel is exactly the time it takes to walk it. The
 flythrough shows it: red zips by, blue drags on. The world-space checker on
-walls and ground turns into short, long, thin or flat cells inside.
+walls and ground turns into short, long, thin or flat cells inside, and so
+does the sunlight that falls in at the mouths (shadow rays bend as camera rays do).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ the door the floor runs back four times as far as the hut is deep. Everything
 inside is stretched with it, so the furniture and pillars are built squeezed
 by s: inside, they look their normal shape. The camera walks in at a quarter
 of its speed and, having crossed the hall, looks back at the little door.
+The low sun shines in at the door: its patch on the floor is stretched too.
 """
 
 from __future__ import annotations

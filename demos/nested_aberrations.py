@@ -13,7 +13,8 @@ box that is *active* there:
 At every point at most one box is active, the containing one with the highest
 priority (docs/semantics.md, "Aberrations"). The flythrough walks down the colonnade: the
 same steps carry the camera three times as far in orange, half as far in cyan, at
-normal pace in magenta.
+normal pace in magenta. A low sun from the east lays the pillars' shadows
+across the floor, deformed with the boxes they fall in.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A doorway into a squeezed hall, and at its end a second doorway onto a garden under a sunset sky.
+"""A doorway into a squeezed hall, and at its end a second doorway onto a garden whose low sun shines back through both.
 
 Three places, joined by two portal pairs in free-standing door frames:
 
@@ -14,7 +14,10 @@ the box that the portal opens into, and through the thin frame at the hall's
 end into the garden: a portal seen through a portal through an aberration.
 The garden itself looks normal, as a ray leaves the box when it is
 teleported. Each primary ray that reaches the garden makes at least two
-portal events. The flythrough walks straight through both frames.
+portal events. The garden's low sun shines back along the same line, through the
+gate, down the hall and out of the atrium's frame: a warm stripe on two roofed
+floors, the fountain's column shadowed into it. The flythrough walks straight
+through both frames.
 """
 
 from __future__ import annotations
