@@ -80,7 +80,7 @@ def build() -> Scene:
     # The setting sun, low behind the garden's far hedge, almost straight down the line of the doorways: it
     # shines back through the gate, down the squeezed hall and out of the atrium's frame, a long warm patch
     # on the floors of two roofed rooms (the fountain's column stands in it and casts a shadow through both).
-    scene.add_light("sun", "sun", look_at=(0.03, -0.185, 0.98), color=(1.0, 0.72, 0.48), intensity=2.0)
+    scene.add_light("sun", "sun", look_at=(0.03, -0.185, 0.98), color=(1.0, 0.72, 0.48), intensity=2.4)
 
     # 1. The atrium: white walls, a stone floor, the first frame in the middle.
     room(scene, "atrium", (-5.0, 0.0, -6.0), (5.0, 3.6, 6.0), wall=CHALK, floor=SAND, ceiling=IVORY,
