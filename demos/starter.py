@@ -43,7 +43,7 @@ def build() -> Scene:
     )
     scene.add_asset("knot", path=KNOT_PATH)
     # The sun over the open front's right: the knot, the plinth and the blocks cast shadows on the floor.
-    scene.add_light("sun", "sun", look_at=(-0.5, -0.9, -0.55), color=(1.0, 0.97, 0.9), intensity=1.1)
+    scene.add_light("daylight", "sun", look_at=(-0.5, -0.9, -0.55), color=(1.0, 0.97, 0.9), intensity=1.1)
 
     # The room: a checkered floor, a back wall and two side walls, open at the front and top.
     scene.add_mesh("floor", "plane", scale=(10.0, 1.0, 10.0), color=FLOOR, checker=0.05)
