@@ -7,6 +7,7 @@ that fills it always agree on their size.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,8 @@ ASSETS = Path(__file__).resolve().parent / "assets"
 #: World units one repeat of a texture covers on a textured block (each image holds about four boards,
 #: courses or tiles across, so a board is about 0.75 units wide).
 TILE = 3.0
+#: How far neighbouring pieces of a textured block reach into each other (world units).
+SEAM = 5e-3
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]
@@ -80,17 +83,20 @@ def block(
         size = tuple(b - a for a, b in zip(lo, hi, strict=True))
         return scene.add_mesh(name, BLOCK, position=centre, scale=size, color=color, checker=checker)
     counts = [max(1, round((b - a) / tile)) for a, b in zip(lo, hi, strict=True)]
-    steps = [(b - a) / n for a, b, n in zip(lo, hi, counts, strict=True)]
     first = -1
-    for i in range(counts[0]):
-        for j in range(counts[1]):
-            for k in range(counts[2]):
-                centre = tuple(a + (c + 0.5) * s for a, c, s in zip(lo, (i, j, k), steps, strict=True))
-                piece = name if counts == [1, 1, 1] else f"{name}_{i}_{j}_{k}"
-                entity = scene.add_mesh(
-                    piece, "box", position=centre, scale=tuple(steps), color=color, checker=checker, texture=image
-                )
-                first = entity if first < 0 else first
+    for cell in itertools.product(*(range(n) for n in counts)):
+        # Neighbouring pieces overlap by SEAM at the faces they share, so no ray (nor a point on the seam)
+        # falls between two separately transformed boxes; the block's outer faces stay where they were asked.
+        spans = [
+            (a + c * (b - a) / n - (SEAM if c > 0 else 0.0), a + (c + 1) * (b - a) / n + (SEAM if c < n - 1 else 0.0))
+            for a, b, n, c in zip(lo, hi, counts, cell, strict=True)
+        ]
+        piece = name if counts == [1, 1, 1] else f"{name}_{cell[0]}_{cell[1]}_{cell[2]}"
+        entity = scene.add_mesh(
+            piece, "box", position=tuple(0.5 * (u + v) for u, v in spans), scale=tuple(v - u for u, v in spans),
+            color=color, checker=checker, texture=image,
+        )  # fmt: skip
+        first = entity if first < 0 else first
     return first
 
 

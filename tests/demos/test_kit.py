@@ -10,7 +10,7 @@ from backends.base import create_backend
 from components import Light, Mesh, Transform
 from demos import build_demo, demo_names
 from demos.assets import make_textures
-from demos.kit import ASSETS, BLOCK, block, texture, use_blocks
+from demos.kit import ASSETS, BLOCK, SEAM, block, texture, use_blocks
 from engine.input import NoInput
 from engine.maths import rotate
 from engine.scene import Scene
@@ -35,7 +35,11 @@ def test_a_textured_block_is_tiled_so_each_repeat_keeps_one_world_size():
     np.testing.assert_allclose(hi, (9.0, 4.0, 0.3), atol=1e-12)
     for mesh, t in pieces.values():
         assert mesh.asset == "box" and mesh.texture == texture("plaster")
-        np.testing.assert_allclose(t.scale, (3.0, 4.0, 0.3))
+        np.testing.assert_allclose(t.scale[1:], (4.0, 0.3))
+        assert 3.0 < t.scale[0] <= 3.0 + 2 * SEAM + 1e-12  # neighbours overlap at their shared faces, no gap
+    seam = np.array([3.0, 2.0, 0.15])  # on the face the first two pieces share: inside both
+    covering = [n for n, (_, t) in pieces.items() if np.all(np.abs(seam - t.position) < 0.5 * np.asarray(t.scale))]
+    assert len(covering) == 2
     plain, _ = meshes["plain"]
     assert plain.asset == BLOCK and plain.texture == ""
 
