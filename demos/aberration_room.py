@@ -14,7 +14,8 @@ on the left, as its text says. What this level adds, so that the deformation
 shows: end walls closing the room, a world-space checker on every surface
 (the thesis mixed a checker texture into every box), a light tint per half,
 and the same props in each half (a sphere, a cube and a column), which look
-slim on the left and squat on the right. Radial boxes scale the camera's speed
+slim on the left and squat on the right. A lamp hangs in each half; the left
+one's shadows are squeezed with its space. Radial boxes scale the camera's speed
 along world axes too, so strafing across the left half is twice as fast.
 """
 
@@ -47,6 +48,12 @@ def build() -> Scene:
     """The room as the thesis built it, plus props and end walls, seen from its -z end."""
     scene = Scene("aberration_room", settings=Settings(background=(0.1, 0.1, 0.12), light_dir=(-0.35, 0.85, -0.4)))
     use_blocks(scene)
+    # The room is closed, so no sun: a lamp hanging in each half. The left one casts shadows,
+    # squeezed along x with the space they fall in; the right one only lights (one shadowing light per frame).
+    scene.add_light("lamp_left", "point", position=(5.25, 6.5, -8.0), color=(1.0, 0.95, 0.85), intensity=22.0)
+    scene.add_light(
+        "lamp_right", "point", position=(-5.25, 6.5, -8.0), color=(1.0, 0.95, 0.85), intensity=22.0, shadows=False
+    )
 
     # The thesis's five boxes (its unit box has its pivot at the bottom: these are the same extents).
     block(scene, "floor", (-10.0, 0.0, -20.0), (10.0, 1.0, 20.0), SAND, 1.0)

@@ -11,7 +11,8 @@ The thesis used its radial method; these boxes are ``metric`` instead, on
 purpose: its rule is the one the camera moves by (docs/semantics.md, "Aberrations"), so the
 perceived length of a tunnel is exactly the time it takes to walk it. The
 flythrough shows it: red zips by, blue drags on. The world-space checker on
-walls and ground turns into short, long, thin or flat cells inside.
+walls and ground turns into short, long, thin or flat cells inside, and so
+does the sunlight that falls in at the mouths (shadow rays bend as camera rays do).
 """
 
 from __future__ import annotations
@@ -82,6 +83,9 @@ def build() -> Scene:
         settings=Settings(background=(0.55, 0.68, 0.85), light_dir=(0.45, 0.8, 0.55), max_events=16),
     )
     use_blocks(scene)
+    # A sun from the left, a little behind the start: the tunnels cast their shadows across the plaza, and
+    # the light that falls in at their mouths is squeezed or stretched with the space inside.
+    scene.add_light("sun", "sun", look_at=(0.7, -0.6, -0.25), color=(1.0, 0.96, 0.88), intensity=1.15)
     block(scene, "ground", (-24.0, -0.3, -26.0), (24.0, 0.0, 20.0), SAND, 1.0)
     block(scene, "back_wall", (-24.0, 0.0, -26.0), (24.0, 8.0, -25.0), SLATE, 1.0)
 

@@ -12,11 +12,29 @@ the door the floor runs back four times as far as the hut is deep. Everything
 inside is stretched with it, so the furniture and pillars are built squeezed
 by s: inside, they look their normal shape. The camera walks in at a quarter
 of its speed and, having crossed the hall, looks back at the little door.
+The low sun shines in at the door: its patch on the floor is stretched too.
 """
 
 from __future__ import annotations
 
-from demos.kit import CLAY, CORAL, GOLD, IVORY, LAWN, NAVY, SAND, SKY, TEAL, Color, Door, Vec3, block, room, use_blocks
+from demos.kit import (
+    CLAY,
+    CORAL,
+    GOLD,
+    IVORY,
+    LAWN,
+    NAVY,
+    SAND,
+    SKY,
+    TEAL,
+    Color,
+    Door,
+    Vec3,
+    block,
+    room,
+    texture,
+    use_blocks,
+)
 from engine.scene import Scene
 from engine.settings import Settings
 from systems.camera_path import CameraPath
@@ -62,10 +80,15 @@ def build() -> Scene:
     """The hut on a lawn, its stretched interior, and a tree beside it for scale."""
     scene = Scene("bigger_inside", settings=Settings(background=(0.62, 0.76, 0.93), light_dir=(0.55, 0.75, 0.4)))
     use_blocks(scene)
+    # A sun low in the south: the hut and the tree cast shadows on the lawn, and through the door a stripe
+    # of sunlight falls onto the stretched hall's floor (its own sky is its ceiling).
+    scene.add_light("sun", "sun", look_at=(-0.3, -0.45, -0.84), color=(1.0, 0.96, 0.88), intensity=1.25)
     block(scene, "lawn", (-40.0, -0.45, -40.0), (40.0, -0.25, 40.0), LAWN, 1.0)
     lo, hi = (-HALF, 0.0, -HALF), (HALF, HEIGHT, HALF)
-    room(scene, "hut", lo, hi, wall=SAND, floor=(0.66, 0.5, 0.36), ceiling=IVORY, thickness=WALL,
-         checker=0.0, floor_checker=0.25, doors={"south": [DOOR]}, wall_colors={"north": NAVY})  # fmt: skip
+    room(scene, "hut", lo, hi, wall=SAND, floor=(0.92, 0.82, 0.7), ceiling=IVORY, thickness=WALL,
+         checker=0.0, floor_checker=0.0,
+         wall_image=texture("plaster"), floor_image=texture("parquet"),
+         doors={"south": [DOOR]}, wall_colors={"north": NAVY})  # fmt: skip
     scene.add_mesh("roof", "pyramid", position=(0.0, HEIGHT + WALL + 0.8, 0.0), scale=(5.0, 1.6, 5.0), color=CLAY)
     furniture(scene)
     scene.add_mesh(

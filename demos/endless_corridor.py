@@ -58,6 +58,12 @@ def build() -> Scene:
         block(scene, f"arch_{i}_east", (w - 0.25, 0.0, z - 0.2), (w, h, z + 0.2), CLAY)
         block(scene, f"arch_{i}_beam", (-w, h - 0.3, z - 0.2), (w, h, z + 0.2), CLAY)
         block(scene, f"lamp_{i}", (-0.3, h - 0.12, z + 2.7), (0.3, h, z + 3.3), GOLD)
+    # A lamp under each lamp block, the two at the ends being one lamp seen from either side of the seam: with
+    # a range of one lamp spacing, every point is lit by the same lamps at the same distances in every repeat,
+    # so the seam stays invisible. No shadows: a shadowing lamp at an end would be shadowed on one side only.
+    for i, z in enumerate((-half, 0.0, half)):
+        scene.add_light(f"lamp_light_{i}", "point", position=(0.0, h - 0.9, z), color=(1.0, 0.9, 0.72),
+                        intensity=2.6, shadows=False, range=half)  # fmt: skip
     # The one landmark of the stretch: a globe on a pedestal, to count the repeats by.
     block(scene, "pedestal", (w - 1.0, 0.0, -0.4), (w - 0.2, 1.0, 0.4), IVORY)
     scene.add_mesh("globe", "sphere", smooth=True, position=(w - 0.6, 1.35, 0.0), scale=0.7, color=GOLD, checker=0.15)

@@ -29,6 +29,7 @@ from demos.kit import (
     TEAL,
     block,
     room,
+    texture,
     use_blocks,
 )
 from demos.starter import KNOT_PATH
@@ -52,8 +53,9 @@ START_LOOK = (-0.2, 1.3, -3.0)
 
 def warm_room(scene: Scene) -> None:
     """The rectangular room at the origin: sand and clay, warm light wood floor."""
-    room(scene, "warm", (-6.0, 0.0, -6.0), (6.0, HEIGHT, 6.0), wall=SAND, floor=(0.80, 0.62, 0.42),
-         ceiling=IVORY, checker=1.2, floor_checker=0.8, wall_colors={"north": CLAY})  # fmt: skip
+    room(scene, "warm", (-6.0, 0.0, -6.0), (6.0, HEIGHT, 6.0), wall=SAND, floor=(0.95, 0.82, 0.68),
+         ceiling=IVORY, checker=1.2, floor_checker=0.0, floor_image=texture("parquet"),
+         wall_colors={"north": CLAY})  # fmt: skip
     block(scene, "warm_partition", (-6.0, 0.0, -0.2), (-GAP, HEIGHT, 0.2), CLAY, 1.2)
     block(scene, "warm_column", (GAP, 0.0, -0.5), (GAP + 1.0, HEIGHT, 0.5), CLAY, 1.2)
     # The back of the room, seen beside the column (and, from the hall, through the gap).

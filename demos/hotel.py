@@ -40,6 +40,7 @@ from demos.kit import (
     block,
     doorway,
     room,
+    texture,
     use_blocks,
 )
 from engine.scene import Scene
@@ -106,8 +107,9 @@ def corridor(scene: Scene) -> None:
     """The corridor: doors down both sides, a runner, lamps, and the door back at its south end."""
     lo, hi = CORRIDOR
     side_doors = [corridor_door(k) for k in range(DOORS_PER_SIDE)]
-    room(scene, "corridor", lo, hi, wall=CHALK, floor=(0.62, 0.5, 0.4), ceiling=IVORY, thickness=WALL,
-         checker=0.0, floor_checker=0.8, doors={"east": side_doors, "west": side_doors, "south": [EXIT_DOOR]},
+    room(scene, "corridor", lo, hi, wall=CHALK, floor=(0.86, 0.74, 0.6), ceiling=IVORY, thickness=WALL,
+         checker=0.0, floor_checker=0.0, wall_image=texture("plaster"), floor_image=texture("parquet"),
+         doors={"east": side_doors, "west": side_doors, "south": [EXIT_DOOR]},
          wall_colors={"north": NAVY})  # fmt: skip
     block(scene, "corridor_runner", (-0.7, 0.0, lo[2]), (0.7, 0.02, hi[2]), RED)
     block(scene, "corridor_painting", (-1.0, 1.0, lo[2]), (1.0, 2.4, lo[2] + 0.05), GOLD)

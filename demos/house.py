@@ -26,7 +26,6 @@ from demos.kit import (
     IVORY,
     LAWN,
     MINT,
-    NAVY,
     PURPLE,
     RED,
     ROSE,
@@ -39,6 +38,7 @@ from demos.kit import (
     block,
     doorway,
     room,
+    texture,
     use_blocks,
 )
 from engine.scene import Scene
@@ -98,8 +98,10 @@ def cottage(scene: Scene) -> None:
 def hall(scene: Scene) -> None:
     """The big hall: four columns, a rug, doors on all four sides."""
     lo, hi = HALL
-    room(scene, "hall", lo, hi, wall=SAND, floor=(0.55, 0.4, 0.3), ceiling=IVORY, thickness=WALL,
-         checker=1.0, floor_checker=1.0, doors={side: [DOOR] for side in ("south", "east", "north", "west")},
+    room(scene, "hall", lo, hi, wall=SAND, floor=(0.9, 0.78, 0.66), ceiling=IVORY, thickness=WALL,
+         checker=0.0, floor_checker=0.0,
+         wall_image=texture("plaster"), floor_image=texture("parquet"),
+         doors={side: [DOOR] for side in ("south", "east", "north", "west")},
          wall_colors={"north": CORAL})  # fmt: skip
     for i, (x, z) in enumerate(((-3.5, -3.5), (3.5, -3.5), (-3.5, -10.5), (3.5, -10.5))):
         scene.add_mesh(
@@ -120,7 +122,9 @@ def gallery(scene: Scene) -> None:
     """A long red gallery with coloured panels on its walls and a statue at the end."""
     lo, hi = GALLERY
     room(scene, "gallery", lo, hi, wall=(0.62, 0.16, 0.16), floor=CHALK, ceiling=IVORY, thickness=WALL,
-         checker=0.0, floor_checker=0.8, doors={"south": [DOOR]})  # fmt: skip
+         checker=0.0, floor_checker=0.0,
+         floor_image=texture("stone"), wall_image=texture("wallpaper"),
+         doors={"south": [DOOR]})  # fmt: skip
     colors = (GOLD, SKY, MINT, ROSE, TEAL)
     for i in range(5):
         z = lo[2] + 3.0 + 4.8 * i
@@ -132,6 +136,11 @@ def gallery(scene: Scene) -> None:
             (hi[0], lo[1] + 2.6, z + 3.0),
             colors[-1 - i],
         )
+    # Two lamps down the gallery (no shadows: the sun's is the scene's one shadowing light); their range
+    # keeps them in the gallery, which no other room comes near.
+    for i, z in enumerate((lo[2] + 7.0, lo[2] + 19.0)):
+        scene.add_light(f"gallery_lamp_{i}", "point", position=(0.0, hi[1] - 1.0, z), color=(1.0, 0.9, 0.75),
+                        intensity=3.2, shadows=False, range=14.0)  # fmt: skip
     scene.add_mesh("gallery_plinth", "box", position=(0.0, lo[1] + 0.5, lo[2] + 1.5), scale=1.0, color=IVORY)
     scene.add_mesh("gallery_statue", "pyramid", position=(0.0, lo[1] + 1.6, lo[2] + 1.5), scale=1.2, color=GOLD)
 
@@ -139,11 +148,15 @@ def gallery(scene: Scene) -> None:
 def bedroom(scene: Scene) -> None:
     """A small blue bedroom: a bed, a bedside table and a lamp."""
     lo, hi = BEDROOM
-    room(scene, "bedroom", lo, hi, wall=BLUE, floor=NAVY, ceiling=IVORY, thickness=WALL,
-         checker=0.0, floor_checker=0.5, doors={"east": [DOOR]})  # fmt: skip
+    room(scene, "bedroom", lo, hi, wall=BLUE, floor=(0.9, 0.8, 0.7), ceiling=IVORY, thickness=WALL,
+         checker=0.0, floor_checker=0.0,
+         wall_image=texture("wallpaper"), floor_image=texture("planks"),
+         doors={"east": [DOOR]})  # fmt: skip
     block(scene, "bed", (lo[0], lo[1], lo[2]), (lo[0] + 2.2, lo[1] + 0.6, lo[2] + 3.2), IVORY)
     block(scene, "pillow", (lo[0] + 0.2, lo[1] + 0.6, lo[2] + 0.2), (lo[0] + 2.0, lo[1] + 0.8, lo[2] + 0.8), SKY)
     block(scene, "table", (lo[0] + 2.5, lo[1], lo[2]), (lo[0] + 3.3, lo[1] + 0.7, lo[2] + 0.8), CLAY)
+    scene.add_light("bedroom_lamp_light", "point", position=(lo[0] + 2.9, lo[1] + 1.6, lo[2] + 0.9),
+                    color=(1.0, 0.85, 0.6), intensity=2.8, shadows=False, range=9.0)  # fmt: skip
     scene.add_mesh(
         "lamp", "sphere", smooth=True, position=(lo[0] + 2.9, lo[1] + 1.0, lo[2] + 0.4), scale=0.6, color=GOLD
     )

@@ -7,6 +7,7 @@ that fills it always agree on their size.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +18,13 @@ from engine.scene import Scene
 #: of block, and a deformed region shows as deformed cells.
 BLOCK_PATH = Path(__file__).resolve().parent / "assets" / "block.obj"
 BLOCK = "block"
+#: The generated textures (demos/assets/make_textures.py).
+ASSETS = Path(__file__).resolve().parent / "assets"
+#: World units one repeat of a texture covers on a textured block (each image holds about four boards,
+#: courses or tiles across, so a board is about 0.75 units wide).
+TILE = 3.0
+#: How far neighbouring pieces of a textured block reach into each other (world units).
+SEAM = 5e-3
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]
@@ -47,6 +55,11 @@ def use_blocks(scene: Scene) -> None:
     scene.add_asset(BLOCK, path=BLOCK_PATH)
 
 
+def texture(name: str) -> str:
+    """The path of a generated texture by its stem (``"plaster"``, ``"parquet"``, ``"stone"``...)."""
+    return str(ASSETS / f"{name}.png")
+
+
 def block(
     scene: Scene,
     name: str,
@@ -54,11 +67,37 @@ def block(
     hi: Sequence[float],
     color: Color,
     checker: float = 0.0,
+    *,
+    image: str = "",
+    tile: float = TILE,
 ) -> int:
-    """An axis-aligned block between the corners ``lo`` and ``hi`` (easier to lay out than centre and size)."""
-    centre = tuple(0.5 * (a + b) for a, b in zip(lo, hi, strict=True))
-    size = tuple(abs(b - a) for a, b in zip(lo, hi, strict=True))
-    return scene.add_mesh(name, BLOCK, position=centre, scale=size, color=color, checker=checker)
+    """An axis-aligned block between the corners ``lo`` and ``hi`` (easier to lay out than centre and size).
+
+    With an ``image`` (a path, see :func:`texture`) the block is built of ``box`` primitives, whose UVs
+    span each face once, about ``tile`` units on a side each, so the texture repeats at one world scale
+    whatever the block's size (``checker`` then counts cells per repeat). Returns the (first) entity.
+    """
+    lo, hi = [min(a, b) for a, b in zip(lo, hi, strict=True)], [max(a, b) for a, b in zip(lo, hi, strict=True)]
+    if not image:
+        centre = tuple(0.5 * (a + b) for a, b in zip(lo, hi, strict=True))
+        size = tuple(b - a for a, b in zip(lo, hi, strict=True))
+        return scene.add_mesh(name, BLOCK, position=centre, scale=size, color=color, checker=checker)
+    counts = [max(1, round((b - a) / tile)) for a, b in zip(lo, hi, strict=True)]
+    first = -1
+    for cell in itertools.product(*(range(n) for n in counts)):
+        # Neighbouring pieces overlap by SEAM at the faces they share, so no ray (nor a point on the seam)
+        # falls between two separately transformed boxes; the block's outer faces stay where they were asked.
+        spans = [
+            (a + c * (b - a) / n - (SEAM if c > 0 else 0.0), a + (c + 1) * (b - a) / n + (SEAM if c < n - 1 else 0.0))
+            for a, b, n, c in zip(lo, hi, counts, cell, strict=True)
+        ]
+        piece = name if counts == [1, 1, 1] else f"{name}_{cell[0]}_{cell[1]}_{cell[2]}"
+        entity = scene.add_mesh(
+            piece, "box", position=tuple(0.5 * (u + v) for u, v in spans), scale=tuple(v - u for u, v in spans),
+            color=color, checker=checker, texture=image,
+        )  # fmt: skip
+        first = entity if first < 0 else first
+    return first
 
 
 @dataclass(frozen=True)
@@ -113,22 +152,27 @@ def room(
     floor_checker: float = 1.0,
     doors: dict[str, Sequence[Door]] | None = None,
     wall_colors: dict[str, Color] | None = None,
+    wall_image: str = "",
+    floor_image: str = "",
+    ceiling_image: str = "",
 ) -> None:
     """A closed room whose *interior* is the box ``lo``..``hi``: floor, walls (with openings) and ceiling.
 
     Walls, floor and ceiling are built outside the interior, ``thickness``
     thick, so the interior measures exactly what was asked. ``ceiling=None``
-    leaves the room open to the sky.
+    leaves the room open to the sky. ``*_image`` textures the walls, floor or ceiling (see :func:`block`;
+    a textured surface's checker, if any, counts cells per repeat).
     """
     doors = doors or {}
     wall_colors = wall_colors or {}
     t = thickness
     x0, y0, z0 = lo
     x1, y1, z1 = hi
-    block(scene, f"{prefix}_floor", (x0 - t, y0 - t, z0 - t), (x1 + t, y0, z1 + t), floor, floor_checker)
+    block(scene, f"{prefix}_floor", (x0 - t, y0 - t, z0 - t), (x1 + t, y0, z1 + t), floor, floor_checker,
+          image=floor_image)  # fmt: skip
     if ceiling is not None:
         # Plain: a checkered ceiling is noise over the picture.
-        block(scene, f"{prefix}_ceiling", (x0 - t, y1, z0 - t), (x1 + t, y1 + t, z1 + t), ceiling)
+        block(scene, f"{prefix}_ceiling", (x0 - t, y1, z0 - t), (x1 + t, y1 + t, z1 + t), ceiling, image=ceiling_image)
     for side, (axis, end) in SIDES.items():
         along = 2 if axis == 0 else 0
         # North/south walls run over the corners; east/west walls fit between them.
@@ -152,4 +196,4 @@ def room(
             c0, c1 = [0.0, ya, 0.0], [0.0, yb, 0.0]
             c0[axis], c1[axis] = plane
             c0[along], c1[along] = a, b
-            block(scene, f"{prefix}_{side}_{i}", c0, c1, color, checker)
+            block(scene, f"{prefix}_{side}_{i}", c0, c1, color, checker, image=wall_image)

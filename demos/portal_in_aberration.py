@@ -1,4 +1,4 @@
-"""A doorway into a squeezed hall, and at its end a second doorway onto a garden under a sunset sky.
+"""A doorway into a squeezed hall, and at its end a second doorway onto a garden whose low sun shines back through both.
 
 Three places, joined by two portal pairs in free-standing door frames:
 
@@ -14,7 +14,10 @@ the box that the portal opens into, and through the thin frame at the hall's
 end into the garden: a portal seen through a portal through an aberration.
 The garden itself looks normal, as a ray leaves the box when it is
 teleported. Each primary ray that reaches the garden makes at least two
-portal events. The flythrough walks straight through both frames.
+portal events. The garden's low sun shines back along the same line, through the
+gate, down the hall and out of the atrium's frame: a warm stripe on two roofed
+floors, the fountain's column shadowed into it. The flythrough walks straight
+through both frames.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from demos.kit import (
     Color,
     block,
     room,
+    texture,
     use_blocks,
 )
 from engine.scene import Scene
@@ -73,10 +77,16 @@ def build() -> Scene:
     """The atrium, the squeezed hall, the garden, and the two portal pairs between their frames."""
     scene = Scene("portal_in_aberration", settings=Settings(background=SUNSET, light_dir=(0.45, 0.7, 0.55)))
     use_blocks(scene)
+    # The setting sun, low behind the garden's far hedge, almost straight down the line of the doorways: it
+    # shines back through the gate, down the squeezed hall and out of the atrium's frame, a long warm patch
+    # on the floors of two roofed rooms (the fountain's column stands in it and casts a shadow through both).
+    scene.add_light("sun", "sun", look_at=(0.03, -0.185, 0.98), color=(1.0, 0.72, 0.48), intensity=2.4)
 
     # 1. The atrium: white walls, a stone floor, the first frame in the middle.
     room(scene, "atrium", (-5.0, 0.0, -6.0), (5.0, 3.6, 6.0), wall=CHALK, floor=SAND, ceiling=IVORY,
-         checker=0.0, floor_checker=0.6, wall_colors={"west": CORAL, "east": (0.55, 0.78, 0.8)})  # fmt: skip
+         checker=0.0, floor_checker=0.0,
+         wall_image=texture("plaster"), floor_image=texture("stone"),
+         wall_colors={"west": CORAL, "east": (0.55, 0.78, 0.8)})  # fmt: skip
     first = frame(scene, "atrium_frame", 0.0, 0.0, -1.0, CLAY)
     scene.add_mesh("atrium_urn", "sphere", smooth=True, position=(-3.4, 0.6, 3.4), scale=1.2, color=CORAL, checker=0.25)
     scene.add_mesh("atrium_cone", "pyramid", position=(3.4, 0.6, -4.0), scale=1.2, color=TEAL)
@@ -103,7 +113,7 @@ def build() -> Scene:
 
     # 3. The garden: a lawn walled by hedges, open to the sunset, a fountain and two trees.
     g = GARDEN_Y
-    block(scene, "garden_lawn", (-12.0, g - 0.3, -16.0), (12.0, g, 6.0), LAWN, 1.0)
+    block(scene, "garden_lawn", (-12.0, g - 0.3, -16.0), (12.0, g, 6.0), LAWN, image=texture("grass"), tile=4.0)
     for name, lo, hi in (("hedge_w", (-12.0, g, -16.0), (-11.0, g + 2.4, 6.0)),
                          ("hedge_e", (11.0, g, -16.0), (12.0, g + 2.4, 6.0)),
                          ("hedge_n", (-12.0, g, -16.0), (12.0, g + 2.4, -15.0)),

@@ -21,6 +21,7 @@ ORDER = 0
 KNOT_PATH = Path(__file__).resolve().parent / "assets" / "knot.obj"
 PLANKS_PATH = Path(__file__).resolve().parent / "assets" / "planks.png"
 TILES_PATH = Path(__file__).resolve().parent / "assets" / "tiles.png"
+PLASTER_PATH = Path(__file__).resolve().parent / "assets" / "plaster.png"
 
 # A warm, slightly desaturated palette that reads well under one light.
 PLASTER = (0.90, 0.85, 0.76)
@@ -41,10 +42,14 @@ def build() -> Scene:
         settings=Settings(background=(0.14, 0.16, 0.21), light_dir=(0.5, 0.9, 0.55), ambient=0.35),
     )
     scene.add_asset("knot", path=KNOT_PATH)
+    # The sun over the open front's right: the knot, the plinth and the blocks cast shadows on the floor.
+    scene.add_light("daylight", "sun", look_at=(-0.5, -0.9, -0.55), color=(1.0, 0.97, 0.9), intensity=1.1)
 
     # The room: a checkered floor, a back wall and two side walls, open at the front and top.
     scene.add_mesh("floor", "plane", scale=(10.0, 1.0, 10.0), color=FLOOR, checker=0.05)
-    scene.add_mesh("back_wall", "box", position=(0.0, 2.25, -5.1), scale=(10.4, 4.5, 0.2), color=PLASTER)
+    scene.add_mesh(
+        "back_wall", "box", position=(0.0, 2.25, -5.1), scale=(10.4, 4.5, 0.2), color=PLASTER, texture=str(PLASTER_PATH)
+    )
     scene.add_mesh("left_wall", "box", position=(-5.1, 2.25, 0.0), scale=(0.2, 4.5, 10.4), color=SAGE)
     scene.add_mesh("right_wall", "box", position=(5.1, 2.25, 0.0), scale=(0.2, 4.5, 10.4), color=SAGE)
 

@@ -2,10 +2,12 @@
 
 An interleaved A/B in one process (``space_scale.paired``: samples of a few frames of the two scenes
 alternate on two backends of one kind, the cost the median of the paired ratios of CPU time): the
-space-count sweep's floor and 30 boxes, and the ``house`` demo from its start (portals in view, the sun's
-shadow rays pass them), each with one sun casting shadows against the implicit sun without shadows.
+space-count sweep's floor and 30 boxes, each with one sun casting shadows against the implicit sun without
+shadows, and any demo from its start (``house``: portals in view, the sun's shadow rays pass them) with its
+Light entities against none (its implicit sun).
 
     python scripts/light_cost.py --backends opencl glsl --pairs 15
+    python scripts/light_cost.py --scenes aberration_tunnels --size 320 --height 240
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from space_scale import base_scene, paired
 
 from components import Light
-from demos import build_demo
+from demos import build_demo, demo_names
 from engine.scene import Scene
 
 
@@ -32,23 +34,27 @@ def boxes(sun: bool) -> Scene:
     return scene
 
 
-def house(sun: bool) -> Scene:
-    scene = build_demo("house")
-    if not sun:
-        for entity, _ in scene.query(Light):
-            scene.delete(entity)
-    return scene
+def demo(name: str) -> Callable[[bool], Scene]:
+    def build(sun: bool) -> Scene:
+        scene = build_demo(name)
+        if not sun:
+            for entity, _ in scene.query(Light):
+                scene.delete(entity)
+        return scene
+
+    return build
 
 
-SCENES: dict[str, Callable[[bool], Scene]] = {"boxes": boxes, "house": house}
+SCENES: dict[str, Callable[[bool], Scene]] = {"boxes": boxes, **{name: demo(name) for name in demo_names()}}
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--backends", nargs="+", default=["opencl", "glsl"])
     parser.add_argument("--precision", default="f32")
-    parser.add_argument("--scenes", nargs="+", default=list(SCENES), choices=list(SCENES))
-    parser.add_argument("--size", type=int, default=320)
+    parser.add_argument("--scenes", nargs="+", default=["boxes", "house"], choices=list(SCENES))
+    parser.add_argument("--size", type=int, default=320, help="width (and height, unless --height)")
+    parser.add_argument("--height", type=int, default=None)
     parser.add_argument("--pairs", type=int, default=15)
     args = parser.parse_args()
     for name in args.backends:
@@ -56,7 +62,8 @@ def main() -> int:
             lit, plain = SCENES[scene_name](True), SCENES[scene_name](False)
             try:
                 row = {"backend": name, "scene": scene_name}
-                row.update(paired(name, args.precision, lit, plain, (args.size, args.size), args.pairs, {}))
+                size = (args.size, args.height or args.size)
+                row.update(paired(name, args.precision, lit, plain, size, args.pairs, {}))
             finally:
                 lit.close()
                 plain.close()
