@@ -60,7 +60,9 @@ def _noise(size: int, cells: int, rng: np.random.Generator) -> np.ndarray:
 
 def _fractal(size: int, rng: np.random.Generator, base: int = 4, octaves: int = 4) -> np.ndarray:
     """Octaves of :func:`_noise`, each twice as fine and half as strong, normalised to [0, 1]."""
-    total = sum(0.5**k * _noise(size, base * 2**k, rng) for k in range(octaves))
+    total = np.zeros((size, size))
+    for k in range(octaves):
+        total = total + 0.5**k * _noise(size, base * 2**k, rng)
     return (total - total.min()) / max(float(np.ptp(total)), 1e-9)
 
 
