@@ -34,18 +34,19 @@ from .layout_h import layout_h
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
 #: and its bindings: each builds on those before it (core.h's records and helpers first, the
-#: kernels' entry point ``trace_pixel`` in journey.h last).
+#: kernels' entry point ``trace_pixel`` in pixel.h last; shade.h after journey.h, whose shadow rays it sends).
 TRACER_FILES: tuple[str, ...] = (
     "core.h",
     "triangle.h",
     "bvh_binary.h",
     "bvh_wide.h",
     "instances.h",
-    "shade.h",
     "space.h",
     "boxes.h",
     "portals.h",
     "journey.h",
+    "shade.h",
+    "pixel.h",
 )
 
 

@@ -6,11 +6,12 @@
  *   bvh_binary.h  an instance's binary tree (plain or compact records)
  *   bvh_wide.h    an instance's 4- or 8-wide tree
  *   instances.h   the nearest mesh hit: the tree over instances, then each instance's tree
- *   shade.h       the colour of a hit
  *   space.h       what boxes and portals share: vector rules, the tie rule, their trees (space_nodes)
  *   boxes.h       aberration boxes: faces, the box holding a point, transitions
  *   portals.h     portals: the nearest quad, teleports
- *   journey.h     primary rays and the event loop: trace_pixel, the kernels' entry point
+ *   journey.h     primary rays and the event loop (camera and shadow rays alike)
+ *   shade.h       the colour of a hit, its lights and their shadow rays
+ *   pixel.h       trace_pixel, the kernels' entry point
  *
  * Written once in the common subset of GLSL 4.30 and OpenCL C 1.2, so the two
  * fast backends agree by construction. backends/reference/ is the float64
@@ -71,7 +72,7 @@
  *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
  *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
  *
- * Entry point (journey.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
+ * Entry point (pixel.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
  * structs), no vector comparisons, no v[i] (VIDX3), literals with an `f`
  * suffix wrapped in REAL() where they meet reals, no float3-real mixing

@@ -1,5 +1,5 @@
-/* journey.h -- a pixel's journey: the primary ray, then event after event until it hits a mesh,
- * leaves the scene or runs out of events (docs/semantics.md). The kernels' entry point. */
+/* journey.h -- a ray's journey: the primary ray, then event after event until it hits a mesh, leaves
+ * the scene or runs out of events (docs/semantics.md); shadow rays take the same one. */
 
 /* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
@@ -330,44 +330,3 @@ FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, rea
     return end == END_MISS || end == END_REACHED;
 }
 #endif
-
-Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
-{
-    Ray ray = primary_ray(cam, i, j);
-    Pixel px;
-    px.color = quantize_rgba(SETTINGS.background.xyz);
-    px.depth = F_INF;
-    px.perceived = F_INF;
-    px.instance = -1;
-    px.events = 0;
-#if HAS_ABERRATIONS
-    /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
-    real3 sigma_lo = cam.sigma_min.xyz;
-    real3 sigma_hi = cam.sigma_max.xyz;
-    /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
-     * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
-    int camera_box = cam.size.z;
-    if (camera_box != -1) {
-        int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
-        ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
-    }
-#endif
-    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX);
-    ray = end.ray;
-    MeshHit hit = end.hit;
-    if (end.end == END_LIMIT) {
-        px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
-    }
-    /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
-     * code masked on every pass. */
-    if (hit.instance >= 0) {
-        real len_r = ray.r_len;
-        real3 position = ray.o + hit.t * ray.r;
-        px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
-        px.depth = TO_FLOAT(ray.L + hit.t * len_r);
-        px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
-        px.instance = INSTANCE(hit.instance).meta.z;
-    }
-    px.events = ray.n;
-    return px;
-}

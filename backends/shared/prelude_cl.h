@@ -4,7 +4,7 @@
  * first, then layout.h, bindings_cl.h, the tracer files (core.h ... journey.h) and the kernel:
  *
  *     defines (REAL_IS_DOUBLE, HAS_*, MAX_EVENTS, ...) + prelude_cl.h + layout.h
- *     + bindings_cl.h + core.h + ... + journey.h + the kernel that calls trace_pixel()
+ *     + bindings_cl.h + core.h + ... + pixel.h + the kernel that calls trace_pixel()
  *
  * Defines read here: REAL_IS_DOUBLE (trace in double; needs cl_khr_fp64),
  * EDGE_FALLBACK_FP64 and WORLD_FP64 (double helpers in a float tracer; set

@@ -17,11 +17,6 @@ bool checker_odd_fp64(double a, double b, double c)
 }
 #endif
 
-#if HAS_SHADOWS
-/* journey.h: whether the shadow ray from position towards a light reaches it (declared here, shade needs it). */
-FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, real3 towards, real reach);
-#endif
-
 #if HAS_LIGHTS
 /* The lights' sum (docs/semantics.md, "Lights and shadows"): colour * max(0, n.l) * falloff, a point light's
  * falloff 1/d^2 (times (clamp(1 - (d/range)^4, 0, 1))^2 with a range), shadowing lights' terms only where
