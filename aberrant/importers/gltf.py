@@ -243,6 +243,18 @@ class _Importer:
             )
         return dict(block)
 
+    def per_vertex(
+        self, primitive: dict[str, Any], key: str, width: int, count: int, name: str, field: str
+    ) -> np.ndarray | None:
+        """A primitive's optional float attribute ``key`` of ``width`` components, one per vertex."""
+        if key not in primitive["attributes"]:
+            return None
+        where = f"{field}.attributes.{key}"
+        values = self.gltf.accessor(primitive["attributes"][key], name, where)
+        if values.shape != (count, width) or values.dtype != np.float32:
+            raise self.gltf.fail(f"expected float VEC{width} values, one per vertex", node=name, field=where)
+        return values
+
     def primitive(self, mesh_index: int, i: int, primitive: dict[str, Any], name: str) -> dict[str, Any]:
         field = f"meshes[{mesh_index}].primitives[{i}]"
         if primitive.get("mode", _TRIANGLES) != _TRIANGLES:
@@ -259,22 +271,11 @@ class _Importer:
         faces = indices.astype(np.int64).reshape(-1, 3)
         if faces.max() >= len(vertices):
             raise self.gltf.fail("an index is past the last vertex", node=name, field=f"{field}.indices")
-        uvs = None
-        if "TEXCOORD_0" in primitive["attributes"]:
-            uvs = self.gltf.accessor(primitive["attributes"]["TEXCOORD_0"], name, f"{field}.attributes.TEXCOORD_0")
-            if uvs.shape != (len(vertices), 2) or uvs.dtype != np.float32:
-                raise self.gltf.fail(
-                    "expected float VEC2 UVs, one per vertex", node=name, field=f"{field}.attributes.TEXCOORD_0"
-                )
+        uvs = self.per_vertex(primitive, "TEXCOORD_0", 2, len(vertices), name, field)
+        if uvs is not None:
             uvs = uvs.astype(np.float64)
             uvs[:, 1] = 1.0 - uvs[:, 1]  # glTF's UV origin is the image's top left, ours the bottom left
-        normals = None
-        if "NORMAL" in primitive["attributes"]:
-            normals = self.gltf.accessor(primitive["attributes"]["NORMAL"], name, f"{field}.attributes.NORMAL")
-            if normals.shape != (len(vertices), 3) or normals.dtype != np.float32:
-                raise self.gltf.fail(
-                    "expected float VEC3 normals, one per vertex", node=name, field=f"{field}.attributes.NORMAL"
-                )
+        normals = self.per_vertex(primitive, "NORMAL", 3, len(vertices), name, field)
         asset = f"mesh{mesh_index}.{i}"
         if asset not in self.document["assets"]:
             self.meshes[f"{asset}.obj"] = mesh_to_obj(
