@@ -63,15 +63,7 @@ def test_a_bad_level_or_size_fails_before_a_window(monkeypatch, capsys, tmp_path
 
 
 def test_the_player_walks_a_demo_in_a_window(display):  # noqa: F811
-    env = {"DISPLAY": display, **{k: v for k, v in __import__("os").environ.items() if k != "DISPLAY"}}
-    result = subprocess.run(
-        [sys.executable, "-c", SCRIPT], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
-    )
-    if "needs a display" in result.stderr or "GLX" in result.stderr:
-        pytest.skip(f"the player window cannot open here: {result.stderr.strip().splitlines()[-1]}")
-    lines = [line for line in result.stdout.splitlines() if line.startswith("REPORT ")]
-    assert result.returncode == 0 and lines, result.stderr
-    report = json.loads(lines[-1][len("REPORT ") :])
+    report = run_script(SCRIPT, display)
     assert report["errors"] == [] and report["drawn"] == 10 and report["traced"] >= 30
     assert report["on_ground"] and report["settled"][1] < report["start"][1] + 1e-9  # gravity put it on the floor
     assert report["walked"][2] < report["settled"][2] - 0.05  # W walked forward (-z)
