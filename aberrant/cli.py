@@ -171,12 +171,10 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     out = Path(args.out or "flythrough.gif")
     check_output(out)
     _check_cluster_args(args)
-    if spp > 1 and (args.workers is not None or args.scheduler is not None):
-        raise UsageError("--spp renders a flythrough here; a cluster's frames take one sample a pixel")
     level = open_level(args.scene)
     scene = level.scene
     if args.workers is not None or args.scheduler is not None:
-        return _render_path_on_cluster(args, level, (width, height), out)
+        return _render_path_on_cluster(args, level, (width, height), out, spp)
 
     def render(backend: Backend) -> float:
         check_frame_memory(backend, (width, height), ("color",), "")
@@ -196,7 +194,7 @@ def cmd_render_path(args: argparse.Namespace) -> int:
     return 0
 
 
-def _render_path_on_cluster(args: argparse.Namespace, level: Level, size: tuple[int, int], out: Path) -> int:
+def _render_path_on_cluster(args: argparse.Namespace, level: Level, size: tuple[int, int], out: Path, spp: int) -> int:
     """``render --path --workers N | --scheduler ADDR``: the frames rendered on a Dask cluster (aberrant/cluster.py)."""
     from aberrant.cluster import render_distributed
     from aberrant.flythrough import path_for, plan_frames
@@ -210,7 +208,7 @@ def _render_path_on_cluster(args: argparse.Namespace, level: Level, size: tuple[
         start = time.perf_counter()
         backend_name = render_distributed(
             level.scene, path, frames, size, out, backend=args.backend or default_backend_name(),
-            precision=args.precision, workers=args.workers, scheduler=args.scheduler, fps=fps,
+            precision=args.precision, workers=args.workers, scheduler=args.scheduler, fps=fps, spp=spp,
         )  # fmt: skip
         elapsed = time.perf_counter() - start
     finally:

@@ -37,6 +37,7 @@ import numpy as np
 
 from aberrant.flythrough import PoseRenderer, plan_frames, progress_bar, simulate_path
 from aberrant.sinks import Sink, check_fps, check_gif_memory, check_output
+from backends.samples import check_spp
 from components import Mesh, Transform
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, BackendUnavailable, shorten
@@ -76,11 +77,13 @@ class FrameJob:
     files: dict[str, bytes]
     poses: tuple[Transform, ...]
     size: tuple[int, int]
+    #: Samples a pixel of every frame.
+    spp: int = 1
     key: str = field(default="", compare=False)
 
 
-def frame_job(scene: Scene, poses: Sequence[Transform], size: Sequence[int]) -> FrameJob:
-    """``scene`` as a scene file plus its mesh and texture files, with the poses to render it from.
+def frame_job(scene: Scene, poses: Sequence[Transform], size: Sequence[int], spp: int = 1) -> FrameJob:
+    """``scene`` as a scene file plus its mesh and texture files, with the poses (and samples a pixel) to render it.
 
     Rotations are written as quaternions (not as the Euler angles a file may have given them
     as), so every value reaches the worker bit for bit.
@@ -123,8 +126,8 @@ def frame_job(scene: Scene, poses: Sequence[Transform], size: Sequence[int]) -> 
         digest.update(name.encode() + b"\0" + hashlib.sha256(files[name]).digest())
     for pose in poses:
         digest.update(repr((pose.position, pose.rotation, pose.scale)).encode())
-    digest.update(f"{width}x{height}".encode())
-    return FrameJob(text, files, tuple(poses), (width, height), digest.hexdigest()[:16])
+    digest.update(f"{width}x{height}x{spp}".encode())
+    return FrameJob(text, files, tuple(poses), (width, height), spp, digest.hexdigest()[:16])
 
 
 def open_job(job: FrameJob, folder: Path) -> Scene:
@@ -173,7 +176,7 @@ class BackendHolder:
             self._drop()
             self._folder = Path(tempfile.mkdtemp(prefix="aberrant-job-"))
             scene = open_job(job, self._folder)
-            self._renderer = PoseRenderer(scene, self.backend, job.poses, job.size)
+            self._renderer = PoseRenderer(scene, self.backend, job.poses, job.size, spp=job.spp)
             self._job = job.key
         return self._renderer
 
@@ -347,14 +350,16 @@ def render_distributed(
     workers: int | None = None,
     scheduler: str | None = None,
     fps: float | None = None,
+    spp: int = 1,
     progress: TextIO | bool = True,
     connect_timeout_s: float | None = None,
 ) -> str:
     """:func:`aberrant.flythrough.render_flythrough`'s clip, its frames rendered on a Dask cluster.
 
     ``workers``: start a LocalCluster of that many processes here; ``scheduler``: the address of
-    a running one. Returns the name of the backend the workers ran.
+    a running one. ``spp``: samples a pixel of every frame. Returns the name of the backend the workers ran.
     """
+    spp = check_spp(spp)
     frames, fps = plan_frames(path, fps=fps, frames=frames)
     out_path = Path(out)
     kind = check_output(out_path)
@@ -364,7 +369,7 @@ def render_distributed(
         check_gif_memory(frames, (width, height))
     _distributed()  # a missing extra fails before the path is walked
     poses = simulate_path(scene, path, frames)
-    job = frame_job(scene, poses, (width, height))
+    job = frame_job(scene, poses, (width, height), spp)
     timeout_s = CONNECT_TIMEOUT_S if connect_timeout_s is None else connect_timeout_s
     with connect(workers, scheduler, timeout_s) as client:
         name = _start_backends(client, backend, precision)

@@ -39,10 +39,10 @@ def local_cluster():
             made.close()
 
 
-def single_process(backend, out: Path, frames: int, size=SIZE) -> None:
+def single_process(backend, out: Path, frames: int, size=SIZE, spp: int = 1) -> None:
     scene = build_demo("starter")
     try:
-        render_flythrough(scene, backend, default_path(scene), frames, size, out, progress=False)
+        render_flythrough(scene, backend, default_path(scene), frames, size, out, progress=False, spp=spp)
     finally:
         scene.close()
 
@@ -73,6 +73,16 @@ def test_the_clip_and_every_frame_match_the_single_process_run(backend_factory, 
     assert sorted(p.name for p in spread.iterdir()) == ["clip.gif", "frames"]  # the work folders are gone
     assert (spread / "clip.gif").read_bytes() == (alone / "clip.gif").read_bytes()
     assert files(spread / "frames") == files(alone / "frames")
+
+
+def test_frames_of_several_samples_a_pixel_match_the_single_process_run(backend_factory, local_cluster, tmp_path):
+    backend = backend_factory("opencl")
+    alone, spread, plain = tmp_path / "alone", tmp_path / "spread", tmp_path / "plain"
+    single_process(backend, alone, 3, spp=4)
+    single_process(backend, plain, 3)
+    distributed(spread, 3, backend="opencl", workers=1, spp=4)
+    assert files(spread) == files(alone)
+    assert files(spread) != files(plain)  # the samples reached the workers
 
 
 def test_a_restarted_run_renders_only_the_missing_frames(backend_factory, local_cluster, tmp_path, monkeypatch):
