@@ -452,7 +452,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SCENE",
-        help="scene names or groups (all, bench, demos, hard, overhead, architecture, hotel, space-count), "
+        help="scene names or groups (all, bench, demos, hard, overhead, architecture, hotel, space-count, features), "
         "scene files or level.py[:func]; "
         "default all (--quick: a few)",
     )
@@ -471,7 +471,7 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=None,
         metavar="SWEEP",
-        help="all, none, or: precision max_events size leaf workgroup tables local_size spp",
+        help="all, none, or: precision max_events size leaf workgroup tables local_size spp shadows",
     )
     bench.add_argument("--no-overhead", action="store_true", help="skip the engine-overhead measurement")
     bench.add_argument(

@@ -4,7 +4,7 @@ A cell never raises for a backend's sake: a backend that cannot trace the
 scene (``BackendUnavailable``, e.g. aberrations not yet in its kernels) gives
 ``unsupported: <reason>``, anything else ``error: <what>``, and the run goes
 on. The scene is shared by every cell of it and comes back exactly as it was
-(``max_events`` and the moved entity are restored).
+(``max_events``, the lights' shadows and the moved entity are restored).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import numpy as np
 
 from aberrant.bench.metrics import Timing, color_error, compare
 from aberrant.bench.reference import ReferenceCache, scene_key
-from aberrant.bench.sweeps import TARGET_SPP, Setting
+from aberrant.bench.sweeps import IMAGE_SWEEPS, TARGET_SPP, Setting
 from backends.base import AOVS, Backend, backend_class, probe
 from backends.samples import render_samples
 from backends.upload import SceneUploader
-from components import Mesh, Transform
+from components import Light, Mesh, Transform
 from engine.bvh import BvhParams, build_bvh
 from engine.camera_view import CameraView, scene_camera
 from engine.errors import BackendUnavailable
@@ -38,6 +38,14 @@ def _ms(start: float) -> float:
     return (time.perf_counter() - start) * 1e3
 
 
+def shadows_off(scene: Scene) -> list[tuple[int, Light]]:
+    """Every shadowing light of the scene switched to cast none; returns the lights as they were."""
+    before = [(entity, light) for entity, light in scene.query(Light) if light.shadows]
+    for entity, light in before:
+        scene.set(entity, replace(light, shadows=False))
+    return before
+
+
 def describe_updates(packed: PackedScene, updates: list[TableUpdate]) -> list[str]:
     """``["instances[3:4] 96 B"]``: which rows of which tables an upload sends."""
     out = []
@@ -47,17 +55,29 @@ def describe_updates(packed: PackedScene, updates: list[TableUpdate]) -> list[st
     return out
 
 
+def image_error_row(color: np.ndarray, own: np.ndarray, truth: np.ndarray) -> dict[str, float | int]:
+    """The colour's error against the backend's own many-sample image and the reference's."""
+    own_error, ref_error = color_error(color, own), color_error(color, truth)
+    return {
+        "target_spp": TARGET_SPP,
+        "own_mae": own_error["mae"],
+        "own_psnr": own_error["psnr"],
+        "ref_mae": ref_error["mae"],
+        "ref_psnr": ref_error["psnr"],
+    }
+
+
 class CellRunner:
     """Measures cells; remembers per run what is costly to learn twice (probes, BVH build times)."""
 
     def __init__(self, references: ReferenceCache, repeat: int, image_errors: bool = False) -> None:
         self.references = references
         self.repeat = repeat
-        #: Whether base cells measure their colour's error too (the spp sweep's cells always do).
+        #: Whether base cells measure their colour's error too (the spp and shadows sweeps' cells always do).
         self.image_errors = image_errors
         self._probes: dict[str, str | None] = {}
         self._bvh_ms: dict[tuple[str, int], float] = {}
-        self._targets: dict[tuple[str, str], np.ndarray] = {}
+        self._targets_cache: dict[tuple[str, str], np.ndarray] = {}
 
     def probe(self, backend: str) -> str | None:
         if backend not in self._probes:
@@ -89,10 +109,14 @@ class CellRunner:
         size: tuple[int, int],
         pair: Callable[[], object] | None = None,
         baseline: Scene | None = None,
+        baseline_spp: int | None = None,
+        image_errors: bool = True,
     ) -> dict[str, Any]:
         """Measure one cell; the row's ``status`` is ``ok``, ``unsupported: ...`` or ``error: ...``.
 
-        ``pair``: one Embree trace of the same rays; ``baseline``: the plain scene this one deforms.
+        ``pair``: one Embree trace of the same rays; ``baseline``: the plain scene this one deforms (or
+        whose feature it adds), its frames taking ``baseline_spp`` samples a pixel (``None``: the setting's).
+        ``image_errors``: False keeps a base cell from measuring its colour's error whatever the run does.
         Either is timed alternately with extra frames, so the ratio sees the same background load
         (the machine is shared).
         """
@@ -112,7 +136,8 @@ class CellRunner:
             reason = self.probe(setting.backend)
             if reason is not None:
                 raise BackendUnavailable(reason)
-            self._measure(scene, camera, setting, size, row, pair, baseline)
+            errors = setting.sweep in IMAGE_SWEEPS or (setting.sweep == "" and self.image_errors and image_errors)
+            self._measure(scene, camera, setting, size, row, pair, baseline, baseline_spp or setting.spp, errors)
             row["status"] = "ok"
         except BackendUnavailable as e:
             row["status"] = f"unsupported: {' '.join(str(e).split())}"
@@ -132,8 +157,11 @@ class CellRunner:
         row: dict,
         pair: Callable[[], object] | None,
         baseline: Scene | None,
+        baseline_spp: int,
+        measure_image: bool,
     ) -> None:
         width, height = size
+        restore: list[tuple[int, Light]] = []
         row["bvh_build_ms"] = self.bvh_build_ms(scene, setting.leaf)
         start = time.perf_counter()
         backend: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)
@@ -144,18 +172,24 @@ class CellRunner:
             row["pack_ms"] = sent.pack_ms
             row["upload_bytes"] = sent.nbytes
             row["upload_ms"] = sent.upload_ms
+            # The reference frame and the colour's targets are the scene's as it is, shadows and all: a
+            # shadows-off cell is measured against what switching them off loses.
+            reference = self.references.get(scene, camera, size)
+            row["reference_ms"] = reference.render_ms
+            row["reference_cached"] = reference.cached
+            targets = self._targets(backend, scene, camera, setting, size) if measure_image else None
+            if not setting.shadows:
+                restore += shadows_off(scene)
+                uploader.sync(scene, camera.position)
             start = time.perf_counter()
             spp = setting.spp
             frame = render_samples(backend, camera, width, height, AOVS, spp)  # compiles the variant: apart
             row["first_frame_ms"] = _ms(start)
-            reference = self.references.get(scene, camera, size)
-            row["reference_ms"] = reference.render_ms
-            row["reference_cached"] = reference.cached
             errors = compare(frame.aov("instance"), frame.aov("depth"), frame.aov("perceived"), reference.aovs)
             row["errors"] = errors.as_dict()
             row["coverage"] = float((reference.aovs["instance"] >= 0).mean())
-            if setting.sweep == "spp" or (setting.sweep == "" and (self.image_errors or spp > 1)):
-                row["image_errors"] = self._image_errors(backend, scene, camera, setting, size, frame.aov("color"))
+            if targets is not None:
+                row["image_errors"] = image_error_row(frame.aov("color"), *targets)
             reference_backend = setting.backend == "reference"
             if not reference_backend:  # the timed variant (colour only) compiles here, not in a timed frame
                 backend.render(camera, width, height, TIMED_AOVS)
@@ -174,38 +208,26 @@ class CellRunner:
             if pair is not None:
                 row["embree_paired"] = self._paired(pair, timed_frame)
             if baseline is not None:
-                row["baseline_paired"] = self._baseline(setting, baseline, size, timed_frame)
+                row["baseline_paired"] = self._baseline(setting, baseline, size, baseline_spp, timed_frame)
             self._ticks(scene, camera, uploader, row)
         finally:
+            for entity, light in restore:
+                scene.set(entity, light)
             backend.release()
 
-    def _image_errors(
-        self,
-        backend: Backend,
-        scene: Scene,
-        camera: CameraView,
-        setting: Setting,
-        size: tuple[int, int],
-        color: np.ndarray,
-    ) -> dict[str, float | int]:
-        """The colour's error against TARGET_SPP samples a pixel of this backend and of the reference.
+    def _targets(
+        self, backend: Backend, scene: Scene, camera: CameraView, setting: Setting, size: tuple[int, int]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """TARGET_SPP samples a pixel of this backend (uploaded with ``scene`` as it is) and of the reference.
 
-        The backend's own target is rendered once per scene and backend family in a run (it is the same
-        for every point of the spp sweep); the reference's is cached on disk like every reference frame.
+        The backend's own is rendered once per scene and backend family in a run (it is the same for every
+        point of the spp and shadows sweeps); the reference's is cached on disk like every reference frame.
         """
         key = (scene_key(scene, camera, size), f"{setting.family} leaf={setting.leaf} {setting.options}")
-        if key not in self._targets:
+        if key not in self._targets_cache:
             own = render_samples(backend, camera, size[0], size[1], ("color",), TARGET_SPP)
-            self._targets[key] = own.aov("color")
-        truth = self.references.get(scene, camera, size, TARGET_SPP).aovs["color"]
-        own_error, ref_error = color_error(color, self._targets[key]), color_error(color, truth)
-        return {
-            "target_spp": TARGET_SPP,
-            "own_mae": own_error["mae"],
-            "own_psnr": own_error["psnr"],
-            "ref_mae": ref_error["mae"],
-            "ref_psnr": ref_error["psnr"],
-        }
+            self._targets_cache[key] = own.aov("color")
+        return self._targets_cache[key], self.references.get(scene, camera, size, TARGET_SPP).aovs["color"]
 
     def _paired(self, other: Callable[[], object], frame: Callable[[], object]) -> dict[str, float]:
         """``other``'s time over the frame's (``ratio``) and its inverse: medians of per-pair ratios."""
@@ -227,16 +249,17 @@ class CellRunner:
         }
 
     def _baseline(
-        self, setting: Setting, baseline: Scene, size: tuple[int, int], frame: Callable[[], object]
+        self, setting: Setting, baseline: Scene, size: tuple[int, int], spp: int, frame: Callable[[], object]
     ) -> dict[str, float]:
-        """The plain scene on a second backend of the same setting, its frames alternating with this scene's."""
+        """The plain scene on a second backend of the same setting (``spp`` samples a pixel), its frames
+        alternating with this scene's."""
         other: Backend = backend_class(setting.backend)(precision=setting.precision, **setting.kwargs)
         try:
             camera = scene_camera(baseline)
             SceneUploader(other, bvh_params=BvhParams(max_leaf_size=setting.leaf)).sync(baseline, camera.position)
 
             def plain() -> object:
-                return other.render(camera, size[0], size[1], TIMED_AOVS)
+                return render_samples(other, camera, size[0], size[1], TIMED_AOVS, spp)
 
             plain()  # compiles its variant
             return self._paired(plain, frame)

@@ -14,6 +14,7 @@ from aberrant.bench import embree
 from aberrant.bench.scenes import SceneSpec
 from backends.base import backend_class
 from components import Aberration, Mesh, Portal
+from engine.packing_lights import shadowing
 from engine.scene import Scene
 
 
@@ -69,4 +70,5 @@ def scene_info(spec: SceneSpec, scene: Scene) -> dict[str, Any]:
         "portals": portals,
         "euclidean": not aberrations and portals == 0,
         "max_events": scene.settings.max_events,
+        "shadows": shadowing(scene),
     }

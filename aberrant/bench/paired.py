@@ -1,5 +1,5 @@
-"""What the cells timed against a plain twin measured: the ``space-count`` sweep and the hotel's views, their
-lines, goals and report sections.
+"""What the cells timed against a plain twin measured: the ``space-count`` sweep, the hotel's views and the
+image features' costs, their lines, goals and report sections.
 
 Every such cell holds ``baseline_paired``: its frames alternated with the
 plain scene's on a second backend of the same setting, ``inverse`` being
@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any
 
+from aberrant.bench.features import FEATURES
 from aberrant.bench.markdown import markdown_table
 from aberrant.bench.space import COUNTS, KINDS, PLACEMENTS, PLAIN, parse_space_name
 
@@ -82,22 +83,35 @@ HOTEL_GOAL = 1.3
 HOTEL_PREFIX = "hotel-view-"
 
 
+def _paired_line(row: dict[str, Any], goal: float | None) -> list[str]:
+    """Both frame times, the paired ratio, the goal and whether it is met (``–`` where there is no goal)."""
+    limit = "–" if goal is None else f"<= {goal}x"
+    ratio = paired_ratio(row)
+    if ratio is None:
+        return ["–", "–", row["status"] if row["status"] != "ok" else "not paired", limit, "not measured"]
+    paired = row["baseline_paired"]
+    met = "–" if goal is None else "**met**" if ratio <= goal else "**not met**"
+    return [f"{paired['frame_ms']:.1f}", f"{paired['other_ms']:.1f}", f"{ratio:.2f}x", limit, met]
+
+
 def hotel_table(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     """A line per hotel view and backend: frame times of both, the paired ratio, the goal and whether it is met."""
     header = ["view", "backend", "hotel ms", "doors shut ms", "paired ratio", "goal", "status"]
     lines = []
     for row in results["rows"]:
-        if not row["scene"].startswith(HOTEL_PREFIX) or row["setting"]["sweep"] != "":
-            continue
-        view = row["scene"][len(HOTEL_PREFIX) :]
-        ratio = paired_ratio(row)
-        if ratio is None:
-            lines.append([view, row["family"], "–", "–", row["status"], f"<= {HOTEL_GOAL}x", "not measured"])
-            continue
-        paired = row["baseline_paired"]
-        met = "**met**" if ratio <= HOTEL_GOAL else "**not met**"
-        lines.append([view, row["family"], f"{paired['frame_ms']:.1f}", f"{paired['other_ms']:.1f}", f"{ratio:.2f}x",
-                      f"<= {HOTEL_GOAL}x", met])  # fmt: skip
+        if row["scene"].startswith(HOTEL_PREFIX) and row["setting"]["sweep"] == "":
+            lines.append([row["scene"][len(HOTEL_PREFIX) :], row["family"], *_paired_line(row, HOTEL_GOAL)])
+    return header, lines
+
+
+def features_table(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """A line per feature and fast backend: with and without it, the paired ratio, the goal, whether it is met."""
+    header = ["feature", "backend", "with ms", "without ms", "paired ratio", "goal", "status"]
+    lines = []
+    for feature in FEATURES:
+        for row in results["rows"]:
+            if row["scene"] == feature.name and row["setting"]["sweep"] == "" and row["backend"] != "reference":
+                lines.append([feature.what, row["family"], *_paired_line(row, feature.goal)])
     return header, lines
 
 
@@ -134,6 +148,25 @@ def hotel_section(results: dict[str, Any]) -> list[str]:
         "The `hotel` demo (104 portals) from each of its views, against the same level with every portal "
         "replaced by a quad of its shape (the doors shut: the same geometry, Euclidean), frames alternated: "
         f"the median of the per-pair ratios. Goal: at most {HOTEL_GOAL}x per view.",
+        "",
+        *markdown_table(header, rows),
+        "",
+    ]
+
+
+def features_section(results: dict[str, Any]) -> list[str]:
+    """The report's image-feature costs (none when no ``features`` scene was measured on a fast backend)."""
+    header, rows = features_table(results)
+    if not rows:
+        return []
+    return [
+        "## What the image features cost",
+        "",
+        "The `starter` demo with each feature against the same scene without it, on two backends of the same "
+        "setting, frames alternated: the median of the per-pair ratios. *Flat*: every mesh untextured and "
+        "without smooth normals; *no lights*: no Light entity (the implicit sun, which casts no shadows), so the "
+        "two sun lines part the shadow rays' cost from the light's; *4 samples a pixel* against 1 of the same "
+        "scene.",
         "",
         *markdown_table(header, rows),
         "",

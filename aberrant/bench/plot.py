@@ -6,7 +6,7 @@ setting traced (geometric mean of frame times, so no one big scene
 dominates; mean of the errors), so points are comparable. Two panels: the
 instance-id mismatch and the 99th-percentile relative depth error; a third,
 the colour's mean absolute error against the reference's many-sample image,
-when the cells measured it (the spp sweep). Zero errors (the reference, most
+when the cells measured it (the spp and shadows sweeps). Zero errors (the reference, most
 f64 rows) sit on the panel's floor, labelled.
 Without matplotlib (the ``bench`` extra) the PNG is a notice drawn with
 Pillow, and the report says so.
@@ -17,6 +17,7 @@ from __future__ import annotations
 import io
 import math
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,6 +35,7 @@ SWEEP_COLORS: dict[str, str] = {
     "tables": "#8c564b",
     "local_size": "#e377c2",
     "spp": "#17becf",
+    "shadows": "#bcbd22",
 }
 MISMATCH_FLOOR_PCT = 1e-4
 DEPTH_FLOOR = 1e-16
@@ -71,13 +73,19 @@ def points(results: dict[str, Any]) -> tuple[list[Point], list[str]]:
         meta.setdefault(row["label"], row)
         if row["status"] == "ok":
             ok[row["label"]][row["scene"]] = row
-    # A fixed-size scene skips the size sweep: its base frame (same size, same knobs) stands in for those points.
+    # A fixed-size scene skips the size sweep, a scene without a shadowing light the shadows sweep: its base
+    # frame (the same frame) stands in for those points.
     base_label = {m["family"]: label for label, m in meta.items() if m["setting"]["sweep"] in ("", "precision")}
+    skips: dict[str, Callable[[dict[str, Any]], bool]] = {
+        "size": lambda info: bool(info.get("fixed_size")),
+        "shadows": lambda info: "shadows" in info.get("skipped_sweeps", []),
+    }
     for label, m in meta.items():
         base = ok.get(base_label.get(m["family"], ""), {})
-        if m["setting"]["sweep"] == "size":
+        skipped = skips.get(m["setting"]["sweep"])
+        if skipped is not None:
             for scene, row in base.items():
-                if results["scenes"].get(scene, {}).get("fixed_size"):
+                if skipped(results["scenes"].get(scene, {})):
                     ok[label].setdefault(scene, row)
     sets = [set(ok[label]) for label in meta]
     common = set.intersection(*sets) if sets and all(sets) else set()
@@ -139,6 +147,8 @@ def _order(setting: dict[str, Any], sweep: str) -> float:
         return float(options.get("tables", "auto") != "auto")
     if sweep == "spp":
         return float(setting.get("spp", 1))
+    if sweep == "shadows":
+        return float(not setting.get("shadows", True))
     return float(setting["precision"] != "f32")
 
 
@@ -171,8 +181,9 @@ def note(results: dict[str, Any]) -> str:
     return (
         f"Each point is one setting: the geometric mean of its median frame times and the mean of its errors "
         f"over the {len(common)} scene(s) every setting traced ({', '.join(common)}); on the size sweep a "
-        f"fixed-size scene counts its base frame. Zero errors are drawn on each panel's floor; Embree is drawn "
-        f"only when it traced every one of those scenes (it traces Euclidean scenes only)."
+        f"fixed-size scene counts its base frame, and on the shadows sweep a scene without a shadowing light. "
+        f"Zero errors are drawn on each panel's floor; Embree is drawn only when it traced every one of those "
+        f"scenes (it traces Euclidean scenes only)."
     )
 
 

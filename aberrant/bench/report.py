@@ -3,7 +3,7 @@
 Targets first (each measured figure beside its goal), then the headline
 matrix (scene x backend, Mrays/s and the ratio to Embree), the plot, the
 engine and non-Euclidean overheads, the Embree anchor, the image error of
-samples a pixel, every cell in detail,
+samples a pixel and of shadows off, what the image features cost, every cell in detail,
 what could not run and why, and what was swept.
 """
 
@@ -16,7 +16,7 @@ from typing import Any
 from aberrant.bench.embree import MODES
 from aberrant.bench.images import image_section
 from aberrant.bench.markdown import markdown_table
-from aberrant.bench.paired import hotel_section, space_section
+from aberrant.bench.paired import features_section, hotel_section, space_section
 from aberrant.bench.sweeps import SWEEPS
 from engine.errors import AberrantError
 
@@ -389,6 +389,7 @@ def render_report(results: dict[str, Any]) -> str:
         *_overhead(results),
         *_embree(results),
         *image_section(results),
+        *features_section(results),
     ]
     lines += _detail(results) + _problems(results) + _swept(results)
     return "\n".join(lines).rstrip() + "\n"

@@ -15,7 +15,7 @@ import os
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -30,7 +30,7 @@ from aberrant.bench.plot import plot_png, space_plot_png
 from aberrant.bench.reference import ReferenceCache, render_ahead
 from aberrant.bench.report import render_report
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
-from aberrant.bench.sweeps import QUICK_SWEEPS, Setting, check_sweeps, settings_for
+from aberrant.bench.sweeps import IMAGE_SWEEPS, QUICK_SWEEPS, Setting, check_sweeps, settings_for
 from aberrant.progress import Progress
 from backends.base import BACKENDS, backend_class
 from backends.samples import check_spp
@@ -158,15 +158,16 @@ def plan(config: BenchConfig) -> list[Setting]:
 
 
 def image_errors(config: BenchConfig) -> bool:
-    """Whether the base cells measure their colour's error (when the spp sweep runs, or --spp is above 1)."""
-    return "spp" in config.sweeps or config.spp > 1
+    """Whether the base cells measure their colour's error (when the spp or shadows sweep runs, or --spp is
+    above 1)."""
+    return any(s in config.sweeps for s in IMAGE_SWEEPS) or config.spp > 1
 
 
 def scene_cells(spec: SceneSpec, settings: list[Setting]) -> list[Setting]:
     """A fixed-size scene skips the size sweep (only its own size tests what it is for); a ``base_only`` one
-    every sweep (it is a point of its own)."""
+    every sweep (it is a point of its own), at its own samples a pixel when it fixes them."""
     if spec.base_only:
-        return [s for s in settings if s.sweep == ""]
+        return [replace(s, spp=spec.spp[0]) if spec.spp else s for s in settings if s.sweep == ""]
     return [s for s in settings if not (spec.size and s.sweep == "size")]
 
 
@@ -230,7 +231,8 @@ def _unmeasured(
     """The scene's facts, anchor and rows when its cells cannot be measured: each row says ``why``."""
     info = {"name": spec.name, "group": spec.group, "description": spec.description, "error": why,
             "fixed_size": list(spec.size) if spec.size else None, "entities": 0, "meshes": 0, "triangles": 0,
-            "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0}  # fmt: skip
+            "aberrations": [], "portals": 0, "euclidean": False, "max_events": 0,
+            "shadows": False}  # fmt: skip
     rows = [{"scene": spec.name, "setting": s.as_dict(), "label": s.label, "family": s.family, "backend": s.backend,
              "precision": s.precision, "size": list(spec.size or s.size_for(config.size)), "status": why,
              "embree_ratio": None, "embree_note": why} for s in todo]  # fmt: skip
@@ -259,6 +261,12 @@ def measure_scene(
             scene.close()
         why = f"error: the scene failed to build: {type(e).__name__}: {' '.join(str(e).split())}"
         return _unmeasured(spec, config, todo, why, progress)
+    if not info["shadows"]:  # nothing to switch off: the base frame is the shadows-off frame
+        skipped = [s for s in todo if s.sweep == "shadows"]
+        todo = [s for s in todo if s.sweep != "shadows"]
+        if skipped:
+            info["skipped_sweeps"] = ["shadows"]
+            progress.step(f"{spec.name}: no shadowing light", len(skipped))
     rows = []
     baseline = None
     try:
@@ -275,7 +283,8 @@ def measure_scene(
             progress.show(f"{spec.name}: {setting.label}")
             size = spec.size or setting.size_for(config.size)
             plain = baseline if setting.is_base and setting.backend != "reference" else None
-            row = cells.run(scene, camera, setting, size, _pair(anchor, scene_anchor, setting, size), plain)
+            row = cells.run(scene, camera, setting, size, _pair(anchor, scene_anchor, setting, size), plain,
+                            spec.spp[1] if spec.spp else None, not spec.base_only)  # fmt: skip
             row["scene"] = spec.name
             _ratio(row, scene_anchor)
             rows.append(row)

@@ -4,7 +4,7 @@ One registry (:func:`bench_scenes`) names every scene with how to build it,
 whether it has a fixed frame size (the watertightness views aim pixel
 centres at mesh vertices and edges, so only their own size tests anything),
 and its group (``bench``, ``demos``, ``hard``, ``overhead``,
-``architecture``, ``hotel``, ``space-count``). Builders take a folder for
+``architecture``, ``hotel``, ``space-count``, ``features``). Builders take a folder for
 the mesh files they generate, so the files are made once and the scenes
 stay plain scene objects.
 """
@@ -20,6 +20,7 @@ import numpy as np
 import trimesh
 
 from aberrant.bench.architecture import architecture_cases, hotel_views
+from aberrant.bench.features import FEATURES
 from aberrant.bench.space import PLAIN, space_cases, thirty_boxes
 from components import Transform
 from engine.errors import AberrantError
@@ -214,6 +215,8 @@ class SceneSpec:
     baseline: Callable[[Path], Scene] | None = None
     #: Only each backend's base setting: the scene is itself one point of a sweep (``space-count``).
     base_only: bool = False
+    #: Samples a pixel of this scene's frames and of its baseline's, whatever --spp (what more samples cost).
+    spp: tuple[int, int] | None = None
 
 
 def _demo_builder(name: str) -> Callable[[Path], Scene]:
@@ -282,6 +285,9 @@ def _specs() -> dict[str, SceneSpec]:
     for name, build, description in space_cases():
         specs.append(SceneSpec(name, build, "space-count", description=description, baseline=thirty_boxes,
                                base_only=True))  # fmt: skip
+    for f in FEATURES:
+        specs.append(SceneSpec(f.name, f.build, "features", description=f"starter: {f.what}", baseline=f.plain,
+                               base_only=True, spp=f.spp))  # fmt: skip
     return {spec.name: spec for spec in specs}
 
 
@@ -291,7 +297,9 @@ def bench_scenes() -> dict[str, SceneSpec]:
 
 
 #: Names that stand for several scenes on the command line.
-GROUPS: tuple[str, ...] = ("all", "bench", "demos", "hard", "overhead", "architecture", "hotel", "space-count")
+GROUPS: tuple[str, ...] = (
+    "all", "bench", "demos", "hard", "overhead", "architecture", "hotel", "space-count", "features",
+)  # fmt: skip
 
 #: What ``--quick`` measures: one of each kind, small.
 QUICK_SCENES: tuple[str, ...] = (

@@ -26,14 +26,17 @@ SWEEPS: dict[str, str] = {
     "tables": "GLSL table store: RGBA32UI images (the llvmpipe default) or storage buffers",
     "local_size": "OpenCL work-group (local) size; 'driver' lets the OpenCL driver choose",
     "spp": "samples per pixel (anti-aliasing): frame time against the colour's error to a many-sample image",
-    # A lighting sweep (shadows on/off) is one more entry here and in BACKEND_SWEEPS, a Setting field like spp.
+    "shadows": "every light's shadows off: the time saved against the colour's error to the shadowed many-sample "
+    "image (scenes with a shadowing light only)",
 }
 #: Which sweeps apply to which backend (the reference has no knobs but the frame's size).
 BACKEND_SWEEPS: dict[str, tuple[str, ...]] = {
-    "glsl": ("precision", "max_events", "size", "leaf", "workgroup", "tables", "spp"),
-    "opencl": ("precision", "max_events", "size", "leaf", "local_size", "spp"),
-    "reference": ("spp",),
+    "glsl": ("precision", "max_events", "size", "leaf", "workgroup", "tables", "spp", "shadows"),
+    "opencl": ("precision", "max_events", "size", "leaf", "local_size", "spp", "shadows"),
+    "reference": ("spp", "shadows"),
 }
+#: The sweeps whose cells measure the colour's error to the many-sample images (the base cells alongside).
+IMAGE_SWEEPS: tuple[str, ...] = ("spp", "shadows")
 QUICK_SWEEPS: tuple[str, ...] = ("precision", "max_events", "leaf")
 #: Values swept. Where a tuple lists the base value (first, or BASE_LEAF), it is the base setting itself; the
 #: base ``max_events`` is the scene's own.
@@ -61,6 +64,7 @@ class Setting:
     max_events: int | None = None  # None: the scene's own
     size_divisor: int = 1  # the frame is --size divided by this on each side
     spp: int = 1  # samples a pixel
+    shadows: bool = True  # False: every light of the scene traced without its shadow rays
     sweep: str = ""
     value: str = "base"
 
@@ -96,6 +100,7 @@ class Setting:
             "max_events": self.max_events,
             "size_divisor": self.size_divisor,
             "spp": self.spp,
+            "shadows": self.shadows,
             "sweep": self.sweep,
             "value": self.value,
             "label": self.label,
@@ -134,6 +139,8 @@ def settings_for(
             ]
         elif sweep == "spp":
             out += [replace(base, spp=n, sweep=sweep, value=str(n)) for n in SAMPLE_COUNTS if n != spp]
+        elif sweep == "shadows":
+            out.append(replace(base, shadows=False, sweep=sweep, value="off"))
         elif sweep == "size":
             out += [replace(base, size_divisor=d, sweep=sweep, value=f"1/{d}") for d in (4, 2)]
         elif sweep == "leaf":
