@@ -3,8 +3,9 @@
 
 The kernels find the portal a ray passes, the box face it crosses and the box that holds a point through two
 dynamic AABB trees (:class:`engine.tlas.AabbTree`), one over the portals' quads, one over the boxes, stored one
-after the other in ``space_nodes`` (roots in the settings' ``space_roots``). A moved portal or box re-packs its
-own row (and, for a portal, the rows of the portals that lead into it) and refits its leaf's path only when it
+after the other in ``space_nodes`` (roots in the settings' ``space_roots``), then each tree's 4-wide form
+(:mod:`engine.space_wide`, which OpenCL's ray walks take). A moved portal or box re-packs its own row (and, for
+a portal, the rows of the portals that lead into it) and refits its leaf's path, in both forms, only when it
 left its fat box; the tree is rebuilt, and every row re-packed, only when the set changes.
 """
 
