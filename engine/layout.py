@@ -235,7 +235,9 @@ TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 #: bytes, as :data:`TLAS_NODE_DTYPE`: ``count == 1``, a leaf over portal or aberration row ``first``;
 #: ``count == 0``, an interior node whose children are ``first`` and ``first + 1``. One table holds both
 #: trees, the portals' from row 0, the boxes' from the settings' ``space_roots.y``. A leaf's bounds hold its
-#: quad's or box's world bounds, grown by a margin and by :data:`engine.tlas.SPACE_SLACK` of their size.
+#: quad's or box's world bounds, grown by a margin and by :data:`engine.tlas.SPACE_SLACK` of their size. After
+#: them come the two trees' 4-wide forms for the kernels' ray walks (:mod:`engine.space_wide`), in rows of
+#: the same size.
 SPACE_NODE = Record("SpaceNode", BVH_NODE.fields)
 SPACE_NODE_DTYPE = BVH_NODE_DTYPE
 
@@ -248,8 +250,8 @@ MATERIAL_DTYPE = MATERIAL.dtype()
 
 #: Scene-wide settings, one row. ``light_dir`` is unit and points towards the
 #: light; ``shading = (ambient, 0, 0, 0)``; ``counts = (instances,
-#: aberrations, portals, max_events)``; ``space_roots = (portal tree root, box tree root, 0, 0)``,
-#: rows of ``space_nodes``; ``lights = (rows of the lights table, 0, 0, 0)``.
+#: aberrations, portals, max_events)``; ``space_roots = (portal tree root, box tree root, portal 4-wide root,
+#: box 4-wide root)``, rows of ``space_nodes``; ``lights = (rows of the lights table, 0, 0, 0)``.
 SETTINGS = Record(
     "Settings",
     (

@@ -339,7 +339,7 @@ class ScenePacker:
         row["shading"][0, 0] = s.ambient
         c = self.packed.counts
         row["counts"][0] = (c["instances"], c["aberrations"], c["portals"], s.max_events)
-        row["space_roots"][0] = (0, self.space.box_root, 0, 0)
+        row["space_roots"][0] = (0, self.space.box_root, *self.space.wide_roots)
         row["lights"][0] = (c.get("lights", 0), 0, 0, 0)
         self.packed.tables["settings"] = row
         self.packed.counts["settings"] = 1

@@ -3,8 +3,9 @@
 
 The kernels find the portal a ray passes, the box face it crosses and the box that holds a point through two
 dynamic AABB trees (:class:`engine.tlas.AabbTree`), one over the portals' quads, one over the boxes, stored one
-after the other in ``space_nodes`` (roots in the settings' ``space_roots``). A moved portal or box re-packs its
-own row (and, for a portal, the rows of the portals that lead into it) and refits its leaf's path only when it
+after the other in ``space_nodes`` (roots in the settings' ``space_roots``), then each tree's 4-wide form
+(:mod:`engine.space_wide`, which OpenCL's ray walks take). A moved portal or box re-packs its own row (and, for
+a portal, the rows of the portals that lead into it) and refits its leaf's path, in both forms, only when it
 left its fat box; the tree is rebuilt, and every row re-packed, only when the set changes.
 """
 
@@ -22,6 +23,7 @@ from engine.clearances import BoxClearances
 from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 from engine.scene import Scene
+from engine.space_wide import ROWS, WideTree, reserved_rows
 from engine.tlas import FAT_MARGIN, SPACE_SLACK, AabbTree
 
 #: Corners of a portal's quad ([-1, 1]^2 at z = 0) and of an aberration's unit box, in their local frames.
@@ -67,6 +69,8 @@ class SpaceTables:
         self.boxes = _Rows.of([])
         self.portal_tree = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), margin, SPACE_SLACK)
         self.box_tree = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), margin, SPACE_SLACK)
+        #: The trees' 4-wide forms for the kernels' ray walks, stored after both binary trees.
+        self._wide = (WideTree(self.portal_tree.nodes, 0), WideTree(self.box_tree.nodes, 0))
         #: Portal rows leading into each portal row (their transfer holds its transform).
         self._sources: dict[int, set[int]] = {}
         #: Per portal row its packed target row; per box row its packed priority and mode.
@@ -84,6 +88,14 @@ class SpaceTables:
     def box_root(self) -> int:
         """The row of the boxes' tree's root in ``space_nodes`` (the portals' tree comes first)."""
         return self.portal_tree.count
+
+    @property
+    def wide_roots(self) -> tuple[int, int]:
+        """The rows in ``space_nodes`` of the portals' and the boxes' 4-wide roots (engine/space_wide.py), after
+        both binary trees. Each wide tree has the rows its set's size reserves, so they stay put while the set
+        does."""
+        portals = self.portal_tree.count + self.box_tree.count
+        return portals, portals + reserved_rows(len(self.portals))
 
     @property
     def modes(self) -> frozenset[str]:
@@ -261,7 +273,14 @@ class SpaceTables:
         table = packed.tables["space_nodes"]
         for node in changed:
             table[base + node] = self._offset(tree.nodes[node : node + 1], base)[0]
-        return [TableUpdate("space_nodes", range(base + n, base + n + 1)) for n in changed]
+        updates = [TableUpdate("space_nodes", range(base + n, base + n + 1)) for n in changed]
+        which = 0 if tree is self.portal_tree else 1
+        wide, at = self._wide[which], self.wide_roots[which]
+        for w in wide.changed(changed):
+            start = at + ROWS * w
+            table[start : start + ROWS] = wide.rows(tree.nodes, at, [w])
+            updates.append(TableUpdate("space_nodes", range(start, start + ROWS)))
+        return updates
 
     @staticmethod
     def _offset(nodes: np.ndarray, base: int) -> np.ndarray:
@@ -272,6 +291,14 @@ class SpaceTables:
 
     def _store_nodes(self, packed: PackedScene) -> None:
         portal, box = self.portal_tree, self.box_tree
-        nodes = np.concatenate([portal.nodes[: portal.count], self._offset(box.nodes[: box.count], self.box_root)])
+        self._wide = (WideTree(portal.nodes, portal.count), WideTree(box.nodes, box.count))
+        parts = [portal.nodes[: portal.count], self._offset(box.nodes[: box.count], self.box_root)]
+        sizes = (len(self.portals), len(self.boxes))
+        for tree, wide, at, n in zip((portal, box), self._wide, self.wide_roots, sizes, strict=True):
+            part = np.zeros(reserved_rows(n), layout.SPACE_NODE_DTYPE)
+            rows = wide.rows(tree.nodes, at)
+            part[: len(rows)] = rows
+            parts.append(part)
+        nodes = np.concatenate(parts)
         packed.counts["space_nodes"] = len(nodes)
         packed.tables["space_nodes"] = nodes if len(nodes) else np.zeros(1, layout.SPACE_NODE_DTYPE)

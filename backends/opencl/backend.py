@@ -198,6 +198,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
     #: portals the tree costs 1.01x the loop in view and 0.90x hidden behind a wall (0.83x / 0.80x with 16);
     #: the box tree 0.88x with 2 boxes in view, 0.48x with 16.
     tree_min: ClassVar[tuple[int, int]] = (4, 1)
+    space_wide: ClassVar[bool] = True
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
     camera_relative: bool = True
     #: Measured through ``aberrant render`` at 4096x4096 on PoCL (peak resident memory): 8 bytes a pixel

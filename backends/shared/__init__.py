@@ -188,19 +188,33 @@ def tree_depth(nodes: np.ndarray, root: int) -> int:
     return depth
 
 
-def space_defines(packed: PackedScene, tree_min: tuple[int, int]) -> dict[str, int]:
-    """PORTAL_TREE, BOX_TREE and SPACE_STACK_SIZE for a packed scene: a tree where there are more portals or
-    boxes than ``tree_min`` says pay for it, a stack as deep as the deeper tree (rounded up to 8, so few
-    variants exist)."""
+def wide_space_depth(nodes: np.ndarray, root: int) -> int:
+    """Levels of the 4-wide space tree stored from row ``root`` of ``space_nodes`` (engine/space_wide.py)."""
+    raw = nodes.view(np.int32).reshape(len(nodes), 8)
+    frontier = np.array([root], np.int64)
+    depth = 0
+    while frontier.size and depth <= len(nodes):
+        depth += 1
+        kids = raw[frontier + 3, :4].reshape(-1)
+        frontier = kids[kids > 0].astype(np.int64)
+    return depth
+
+
+def space_defines(packed: PackedScene, tree_min: tuple[int, int], wide: bool = False) -> dict[str, int]:
+    """PORTAL_TREE, BOX_TREE, SPACE_WIDE and SPACE_STACK_SIZE for a packed scene: a tree where there are more
+    portals or boxes than ``tree_min`` says pay for it, walked in its 4-wide form where ``wide``; a stack that
+    fits the deeper tree's walk (a binary one's depth, a wide one's 3 entries a level and one; the point
+    look-up walks the binary tree), rounded up to 8, so few variants exist."""
     portals, boxes = packed.counts.get("portals", 0), packed.counts.get("aberrations", 0)
     nodes, roots = packed.tables["space_nodes"], packed.tables["settings"]["space_roots"][0]
-    use_portals, use_boxes = portals > tree_min[0], boxes > tree_min[1]
-    depth = max(
-        tree_depth(nodes, int(roots[0])) if use_portals else 0, tree_depth(nodes, int(roots[1])) if use_boxes else 0
-    )
+    use = portals > tree_min[0], boxes > tree_min[1]
+    depth = max([tree_depth(nodes, int(roots[k])) for k in (0, 1) if use[k]], default=0)
+    if wide:
+        depth = max([depth] + [3 * wide_space_depth(nodes, int(roots[k + 2])) + 1 for k in (0, 1) if use[k]])
     return {
-        "PORTAL_TREE": int(use_portals),
-        "BOX_TREE": int(use_boxes),
+        "PORTAL_TREE": int(use[0]),
+        "BOX_TREE": int(use[1]),
+        "SPACE_WIDE": int(wide),
         "SPACE_STACK_SIZE": max(MIN_SPACE_STACK, -(-depth // 8) * 8),
     }
 
@@ -216,6 +230,9 @@ class UploadedScene:
     #: Above this many portals, and boxes, the kernels find them through their trees, below it with loops
     #: (where those are as fast: each backend's own, from scripts/space_scale.py A/Bs).
     tree_min: ClassVar[tuple[int, int]] = (8, 4)
+    #: Whether the kernels walk the space trees' 4-wide forms (SPACE_WIDE), not the binary ones: each
+    #: backend's own, from scripts/space_tree_ab.py A/Bs.
+    space_wide: ClassVar[bool] = False
 
     def _forget_upload(self) -> None:
         self._counts: dict[str, int] = {}
@@ -228,7 +245,9 @@ class UploadedScene:
         self._features = Features()
         self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
         self._tlas_stack = MIN_TLAS_STACK
-        self._space: dict[str, int] = {"PORTAL_TREE": 0, "BOX_TREE": 0, "SPACE_STACK_SIZE": MIN_SPACE_STACK}
+        self._space: dict[str, int] = {
+            "PORTAL_TREE": 0, "BOX_TREE": 0, "SPACE_WIDE": 0, "SPACE_STACK_SIZE": MIN_SPACE_STACK
+        }  # fmt: skip
         self._uploaded = False
 
     def _note_upload(self, packed: PackedScene, rewritten: set[str]) -> None:
@@ -238,7 +257,7 @@ class UploadedScene:
         if "tlas_nodes" in rewritten:
             self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
         if rewritten & {"space_nodes", "portals", "aberrations"}:
-            self._space = space_defines(packed, self.tree_min)
+            self._space = space_defines(packed, self.tree_min, self.space_wide)
         self._counts = dict(packed.counts)
         self._origin = np.asarray(packed.origin, dtype=np.float64).copy()
         # The boxes in use, for the camera row's box (pack_camera); a copy, as the packer edits its tables.

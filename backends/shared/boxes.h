@@ -91,7 +91,7 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
 {
     Event best = no_event();
 #if BOX_TREE
-    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.y)
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.y, SETTINGS.space_roots.w)
     best = box_faces(SCENE_PASS best, leaf, o, r, t_min, skip);
     SPACE_LEAVES_END
 #else

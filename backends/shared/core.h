@@ -63,6 +63,8 @@
  *   PORTAL_TREE        find the portal a ray passes through the tree over portals (space_nodes), not a
  *                      loop over all; BOX_TREE the same for box faces and the box holding a point; the
  *                      host sets them above a few portals / boxes, where the tree is faster
+ *   SPACE_WIDE         1: the rays walk those trees' 4-wide forms (space_nodes from space_roots.z / .w,
+ *                      engine/space_wide.py; OpenCL); 0: the binary trees
  *   SPACE_STACK_SIZE   their traversal stack; the host sizes it to the deeper tree's depth
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
  *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the

@@ -33,7 +33,7 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
 {
     Event best = no_event();
 #if PORTAL_TREE
-    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.x)
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.x, SETTINGS.space_roots.z)
     best = portal_quad(SCENE_PASS best, leaf, o, r, t_min, skip);
     SPACE_LEAVES_END
 #else

@@ -92,21 +92,22 @@ real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
  * interior node's first child > 0: the root is never a child), so a popped node needs no second load. */
 #define SPACE_AT(n) (AS_INT(n.hi.w) == 0 ? AS_INT(n.lo.w) : ~AS_INT(n.lo.w))
 
-/* The leaves of a space tree from root that the ray (o, r) enters within (t_min, best.t], nearest first:
- * SPACE_LEAVES_BEGIN(root) declares the traversal and stands at each leaf with its row in `leaf`, for the
- * caller's test (which may lower best.t); SPACE_LEAVES_END pops to the next. While-while, as the tree over
- * instances (instances.h): the leaf test runs outside the descent loop. A visit (SPACE_VISIT) loads both
- * children, slabs them (space_slab), goes on to the nearer one entered and stacks the other with its
- * entry t (the host sizes the stack to the tree's depth); the stack holds SPACE_AT, so a pop loads
- * nothing. */
-#define SPACE_LEAVES_BEGIN(root)                                                                     \
-    SpaceRay sr = space_ray(o, r);                                                                   \
-    int stack_at[SPACE_STACK_SIZE];                                                                  \
-    real stack_t[SPACE_STACK_SIZE];                                                                  \
-    int sp = 0;                                                                                      \
-    SpaceNode top = SPACE_NODE(root);                                                                \
-    int at = SPACE_AT(top);                                                                          \
-    bool more = slab_hit(space_slab(o, sr, top), t_min, best.t);                                     \
+#ifdef __OPENCL_VERSION__
+/* The next stacked node entered no later than best.t into at; more tells whether there was one. */
+#define SPACE_POP                                                                                    \
+    more = false;                                                                                    \
+    while (sp > 0 && !more) {                                                                        \
+        sp -= 1;                                                                                     \
+        if (stack_t[sp] <= best.t) {                                                                 \
+            at = stack_at[sp];                                                                       \
+            more = true;                                                                             \
+        }                                                                                            \
+    }
+#endif
+
+/* SPACE_LEAVES_BEGIN's walk after its set-up (at, more and the stack), and SPACE_LEAVES_END: descend to a
+ * leaf (SPACE_DESCEND), stand at it, go on (SPACE_NEXT). */
+#define SPACE_LEAVES_LOOP                                                                            \
     while (more) {                                                                                   \
         SPACE_DESCEND                                                                                \
         if (more) {                                                                                  \
@@ -115,6 +116,101 @@ real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
         }                                                                                            \
         SPACE_NEXT                                                                                   \
     }
+
+#if SPACE_WIDE
+#ifndef __OPENCL_VERSION__
+#error "SPACE_WIDE is OpenCL's (on llvmpipe the 4-wide walk is slower than the binary one)"
+#endif
+/* The leaves of a space tree that the ray (o, r) enters within (t_min, best.t], nearest first, through its
+ * 4-wide form from wide_root (engine/space_wide.py; root, the binary tree's, is the host's):
+ * SPACE_LEAVES_BEGIN(root, wide_root) declares the traversal and stands at each leaf with its row in
+ * `leaf`, for the caller's test (which may lower best.t); SPACE_LEAVES_END pops to the next. A visit loads
+ * a wide node's four rows, slabs its four children at once (space_slab's arithmetic lane by lane), pushes
+ * those entered with the nearest on top, and pops the nearest; the stack holds a child's row or ~row for
+ * a leaf (the host sizes it to 3 entries per wide level). */
+#define SPACE_LEAVES_BEGIN(root, wide_root)                                                          \
+    SpaceRay sr = space_ray(o, r);                                                                   \
+    real4 ox = R4(o.x, o.x, o.x, o.x);                                                               \
+    real4 oy = R4(o.y, o.y, o.y, o.y);                                                               \
+    real4 oz = R4(o.z, o.z, o.z, o.z);                                                               \
+    real4 ix = R4(sr.inv.x, sr.inv.x, sr.inv.x, sr.inv.x);                                           \
+    real4 iy = R4(sr.inv.y, sr.inv.y, sr.inv.y, sr.inv.y);                                           \
+    real4 iz = R4(sr.inv.z, sr.inv.z, sr.inv.z, sr.inv.z);                                           \
+    real4 px = R4(sr.pad.x, sr.pad.x, sr.pad.x, sr.pad.x);                                           \
+    real4 py = R4(sr.pad.y, sr.pad.y, sr.pad.y, sr.pad.y);                                           \
+    real4 pz = R4(sr.pad.z, sr.pad.z, sr.pad.z, sr.pad.z);                                           \
+    int stack_at[SPACE_STACK_SIZE];                                                                  \
+    real stack_t[SPACE_STACK_SIZE];                                                                  \
+    int sp = 0;                                                                                      \
+    int at = wide_root;                                                                              \
+    bool more = true;                                                                                \
+    SPACE_LEAVES_LOOP
+
+/* The four children's entry and exit t (tn, tf) of wide node at (rows: lo.x lo.y | lo.z hi.x | hi.y hi.z |
+ * child: kids.lo). */
+#define SPACE_WIDE_SLABS                                                                             \
+    SpaceNode w0 = SPACE_NODE(at);                                                                   \
+    SpaceNode w1 = SPACE_NODE(at + 1);                                                               \
+    SpaceNode w2 = SPACE_NODE(at + 2);                                                               \
+    SpaceNode kids = SPACE_NODE(at + 3);                                                             \
+    real4 tx0 = (TO_REAL4(w0.lo) - ox) * ix;                                                         \
+    real4 tx1 = (TO_REAL4(w1.hi) - ox) * ix;                                                         \
+    real4 ty0 = (TO_REAL4(w0.hi) - oy) * iy;                                                         \
+    real4 ty1 = (TO_REAL4(w2.lo) - oy) * iy;                                                         \
+    real4 tz0 = (TO_REAL4(w1.lo) - oz) * iz;                                                         \
+    real4 tz1 = (TO_REAL4(w2.hi) - oz) * iz;                                                         \
+    real4 tn = max(max(min(tx0, tx1) - px, min(ty0, ty1) - py), min(tz0, tz1) - pz);                 \
+    real4 tf = min(min(max(tx0, tx1) + px, max(ty0, ty1) + py), max(tz0, tz1) + pz);
+
+/* The four lanes tested as vectors, then a lane's branch is one compare; those entered pushed with the
+ * nearest on top (an insertion step), and the nearest popped. */
+#define SPACE_DESCEND                                                                                \
+    while (at > 0 && more) {                                                                         \
+        SPACE_WIDE_SLABS                                                                             \
+        int4 hit = convert_int4(tf >= max(tn, R4(t_min, t_min, t_min, t_min))) &                     \
+                   convert_int4(tn <= R4(best.t, best.t, best.t, best.t)) &                          \
+                   (as_int4(kids.lo) != (int4)(0));                                                  \
+        int base = sp;                                                                               \
+        SPACE_WIDE_PUSH(x)                                                                           \
+        SPACE_WIDE_PUSH(y)                                                                           \
+        SPACE_WIDE_PUSH(z)                                                                           \
+        SPACE_WIDE_PUSH(w)                                                                           \
+        SPACE_POP                                                                                    \
+    }
+#define SPACE_WIDE_PUSH(L)                                                                           \
+    if (hit.L != 0 && sp < SPACE_STACK_SIZE) {                                                       \
+        int j = sp;                                                                                  \
+        while (j > base && stack_t[j - 1] < tn.L) {                                                  \
+            stack_t[j] = stack_t[j - 1];                                                             \
+            stack_at[j] = stack_at[j - 1];                                                           \
+            j -= 1;                                                                                  \
+        }                                                                                            \
+        stack_t[j] = tn.L;                                                                           \
+        stack_at[j] = AS_INT(kids.lo.L);                                                             \
+        sp += 1;                                                                                     \
+    }
+#define SPACE_NEXT                                                                                   \
+    if (more) {                                                                                      \
+        SPACE_POP                                                                                    \
+    }
+
+#else
+/* The leaves of a space tree from root that the ray (o, r) enters within (t_min, best.t], nearest first:
+ * SPACE_LEAVES_BEGIN(root, wide_root) declares the traversal (wide_root unused) and stands at each leaf
+ * with its row in `leaf`, for the caller's test (which may lower best.t); SPACE_LEAVES_END pops to the
+ * next. While-while, as the tree over instances (instances.h): the leaf test runs outside the descent loop. A visit (SPACE_VISIT) loads both
+ * children, slabs them (space_slab), goes on to the nearer one entered and stacks the other with its
+ * entry t (the host sizes the stack to the tree's depth); the stack holds SPACE_AT, so a pop loads
+ * nothing. */
+#define SPACE_LEAVES_BEGIN(root, wide_root)                                                          \
+    SpaceRay sr = space_ray(o, r);                                                                   \
+    int stack_at[SPACE_STACK_SIZE];                                                                  \
+    real stack_t[SPACE_STACK_SIZE];                                                                  \
+    int sp = 0;                                                                                      \
+    SpaceNode top = SPACE_NODE(root);                                                                \
+    int at = SPACE_AT(top);                                                                          \
+    bool more = slab_hit(space_slab(o, sr, top), t_min, best.t);                                     \
+    SPACE_LEAVES_LOOP
 
 /* One visit of interior node at's children: their slabs h0, h1, whether the ray enters each, which
  * comes first. */
@@ -128,16 +224,6 @@ real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
     bool second_first = hit1 && (!hit0 || h1.x < h0.x);
 
 #ifdef __OPENCL_VERSION__
-/* The next stacked node entered no later than best.t into at; more tells whether there was one. */
-#define SPACE_POP                                                                                    \
-    more = false;                                                                                    \
-    while (sp > 0 && !more) {                                                                        \
-        sp -= 1;                                                                                     \
-        if (stack_t[sp] <= best.t) {                                                                 \
-            at = stack_at[sp];                                                                       \
-            more = true;                                                                             \
-        }                                                                                            \
-    }
 /* PoCL: the descent pushes only when both children are entered and pops after a miss; SPACE_NEXT pops
  * after a leaf (against the llvmpipe shape below: 2-5 % less CPU time per frame). */
 #define SPACE_DESCEND                                                                                \
@@ -186,5 +272,7 @@ real2 space_slab(real3 o, SpaceRay sr, SpaceNode n)
         at = stack_at[sp];                                                                           \
     }
 #endif
+
+#endif /* SPACE_WIDE */
 
 #endif

@@ -33,6 +33,7 @@ TREES_AND_LOOPS = [
 ]
 LOOPS = {"PORTAL_TREE": 0, "BOX_TREE": 0}
 TREES = {"PORTAL_TREE": 1, "BOX_TREE": 1}
+BINARY = {**TREES, "SPACE_WIDE": 0}  # OpenCL's trees walked as binary ones (its own: 4-wide)
 SIZE = (72, 54)
 
 CASES = {
@@ -59,12 +60,13 @@ def test_the_trees_and_the_loops_give_identical_frames(backend_factory, backend_
     backend = backend_factory(backend_name, precision)
     frames = []
     try:
-        for defines in (LOOPS, TREES):
+        for defines in (LOOPS, TREES, BINARY):
             backend.extra_defines = dict(defines)
             frames.append(render_scene(backend, CASES[case], SIZE))
     finally:
         backend.extra_defines = {}
-    same_frames(*frames)
+    same_frames(frames[0], frames[1])
+    same_frames(frames[0], frames[2])
     assert (frames[0].events > 0).any()  # the space is seen
 
 

@@ -20,6 +20,7 @@ from engine.packed import TableUpdate
 from engine.packing import ScenePacker
 from engine.packing_space import BOX_CORNERS, QUAD_CORNERS, corner_bounds
 from engine.scene import Scene
+from engine.space_wide import ROWS
 from engine.tlas import AabbTree
 
 # --- the clearances against every pair --------------------------------------------------------------------
@@ -162,7 +163,12 @@ def test_moves_repack_rows_and_refit_and_equal_a_fresh_pack(precision, kind):
         assert all(u.rows is not None for u in updates), updates
         assert 1 <= rows <= (2 if kind == "portals" else 40), updates
         nodes = sum(len(u.rows) for u in updates if u.table == "space_nodes")
-        assert nodes <= 2 * packer.space.portal_tree.depth + 2 * packer.space.box_tree.depth
+        # the leaf's path in the binary tree and in the 4-wide one (at most a wide node a binary level)
+        assert nodes <= (2 + ROWS) * (packer.space.portal_tree.depth + packer.space.box_tree.depth)
+        space, stored = packer.space, packer.packed.tables["space_nodes"]
+        for wide, tree, root in zip(space._wide, (space.portal_tree, space.box_tree), space.wide_roots, strict=True):
+            rows = wide.rows(tree.nodes, root)  # the wide form of the refit tree, whole: what the refit wrote
+            assert stored[root : root + len(rows)].tobytes() == rows.tobytes()
     move(scene, "mover", (0.5, 0.0, 0.0))
     packer.sync(scene)
     fresh = ScenePacker(precision)
