@@ -48,8 +48,8 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #endif
 
 /* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
- * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py), nearest child first;
- * each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
+ * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py; TLAS_WIDTH 4 or 8: its
+ * wide nodes, engine/tlas_wide.py), nearest child first; each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
  * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
  * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
 FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
@@ -85,7 +85,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
             WIDE_POP(first, kind)
         }
         if (!done) {
-            /* A leaf: its instance, culled by the exact bounds on the instance row (the lane's are fat). */
+            /* A leaf: its instance, culled by the exact bounds on the instance row (a moved one's lane is fat). */
             real2 h = slab(o, inv, INSTANCE(first).bounds_min.xyz, INSTANCE(first).bounds_max.xyz);
             if (slab_hit(h, t_min, best.t)) {
                 best = trace_instance(SCENE_PASS best, first, o, d, t_min);
