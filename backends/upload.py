@@ -52,6 +52,7 @@ class SceneUploader:
             bvh_params=bvh_params,
             bvh_width=width,
             bvh_compact=compact,
+            tlas_width=backend.tlas_width,
         )
 
     @property

@@ -13,7 +13,7 @@ import numpy as np
 from engine.bvh import Bvh, frozen_bvh, half_area
 from engine.layout import BVH_WIDTHS
 
-__all__ = ["collapse", "leaf_blocks"]
+__all__ = ["collapse", "collapse_slots", "leaf_blocks", "wide_nodes"]
 
 
 def _leaf_counts(first: np.ndarray, inner: np.ndarray) -> np.ndarray:
@@ -45,14 +45,25 @@ def collapse(bvh: Bvh, width: int = 4) -> Bvh:
         raise ValueError(f"collapse builds widths {sorted(w for w in BVH_WIDTHS if w > 2)}, got {width!r}")
     b = bvh.nodes
     first, count = b["first"].astype(np.int64), b["count"].astype(np.int64)
+    slots = collapse_slots(first, count, b["bounds_min"], b["bounds_max"], width)
+    nodes = wide_nodes(slots, first, count, b["bounds_min"], b["bounds_max"], width)
+    return frozen_bvh(nodes, bvh.triangle_order.copy(), bvh.params)
+
+
+def collapse_slots(
+    first: np.ndarray, count: np.ndarray, bounds_min: np.ndarray, bounds_max: np.ndarray, width: int
+) -> np.ndarray:
+    """The wide nodes of a binary tree (``first``/``count`` as :data:`engine.layout.BVH_NODE_DTYPE`: ``count
+    == 0`` interior with children ``first`` and ``first + 1``; bounds (N, 3)) as (F, ``width``) binary node
+    ids, -1 for an empty slot, in level order (row 0 the root's; see :func:`collapse`)."""
     inner = count == 0
-    area = half_area(b["bounds_min"].T, b["bounds_max"].T)
+    area = half_area(np.asarray(bounds_min).T, np.asarray(bounds_max).T)
     # A subtree of at most `width` leaves is opened whole (its inner nodes are pulled before any other),
     # so its leaves share one wide node: filling by area alone left most 8-wide nodes of the tori holding
     # 2 leaves (15408 of 25445 nodes at 200k triangles, now 4040 of 14509; SAH 24.1 -> 23.6; 0.5-1.5 %
     # less CPU per frame on the tori, PoCL 3.1, 800x800).
     leaves = _leaf_counts(first, inner)
-    opened = np.zeros(len(b), bool)
+    opened = np.zeros(len(first), bool)
     small = np.flatnonzero(inner & (leaves <= width))
     opened[first[small]] = opened[first[small] + 1] = True
     boost = area.max() + 1.0
@@ -84,7 +95,20 @@ def collapse(bvh: Bvh, width: int = 4) -> Bvh:
         rows.append(slots)
         flat = slots.ravel()
         frontier = flat[(flat >= 0) & inner[np.maximum(flat, 0)]]
-    slots = np.concatenate(rows)
+    return np.concatenate(rows)
+
+
+def wide_nodes(
+    slots: np.ndarray,
+    first: np.ndarray,
+    count: np.ndarray,
+    bounds_min: np.ndarray,
+    bounds_max: np.ndarray,
+    width: int,
+) -> np.ndarray:
+    """The ``width``-wide node table of :func:`collapse_slots`' ``slots``: each slot's box, its wide child
+    (interior) or ``first`` (a leaf) and ``count`` (-1 for an empty slot)."""
+    inner = count == 0
     wide_inner = (slots >= 0) & inner[np.maximum(slots, 0)]
     # Wide nodes are numbered in level order, and inner slots in row-major order are exactly that order.
     wide_id = np.zeros(slots.shape, np.int64)
@@ -98,11 +122,11 @@ def collapse(bvh: Bvh, width: int = 4) -> Bvh:
         nodes[field] = values.reshape(nodes[field].shape)
 
     for k, axis in enumerate("xyz"):
-        put(f"lo_{axis}", np.where(empty, 0.0, b["bounds_min"][safe, k]))
-        put(f"hi_{axis}", np.where(empty, 0.0, b["bounds_max"][safe, k]))
+        put(f"lo_{axis}", np.where(empty, 0.0, bounds_min[safe, k]))
+        put(f"hi_{axis}", np.where(empty, 0.0, bounds_max[safe, k]))
     put("child", np.where(empty, 0, np.where(wide_inner, wide_id, first[safe])))
     put("count", np.where(empty, -1, count[safe]))
-    return frozen_bvh(nodes, bvh.triangle_order.copy(), bvh.params)
+    return nodes
 
 
 def leaf_blocks(bvh: Bvh, block: int = 4) -> tuple[np.ndarray, np.ndarray]:

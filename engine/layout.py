@@ -228,6 +228,8 @@ def bvh_compact(nodes: np.ndarray) -> bool:
 #: ``count == 1``: a leaf over instance row ``first``; ``count == 0``: an interior node whose
 #: children are ``first`` and ``first + 1``. Bounds are float32 rounded outward, a leaf's the
 #: instance's world bounds grown by a margin (the exact ones are on the instance row). Root at row 0.
+#: A packer with ``tlas_width`` 4 or 8 stores the tree collapsed into :data:`BVH_WIDTHS` records instead
+#: (``engine.tlas_wide``: a leaf lane's ``count`` is 1 and its ``child`` the instance row).
 TLAS_NODE = Record("TlasNode", BVH_NODE.fields)
 TLAS_NODE_DTYPE = BVH_NODE_DTYPE
 

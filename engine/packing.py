@@ -37,6 +37,7 @@ from engine.packing_space import SpaceTables
 from engine.scene import SETTINGS, Scene
 from engine.textures import DEFAULT_BUDGET_MIB, pack_atlas
 from engine.tlas import FAT_MARGIN, AabbTree
+from engine.tlas_wide import WideTlas
 
 
 def _round_out(lo: np.ndarray, hi: np.ndarray, precision: Precision) -> tuple[np.ndarray, np.ndarray]:
@@ -80,6 +81,7 @@ class ScenePacker:
         bvh_width: int = 2,
         tlas_margin: float = FAT_MARGIN,
         bvh_compact: bool = False,
+        tlas_width: int = 2,
         texture_budget_mib: float = DEFAULT_BUDGET_MIB,
     ) -> None:
         if bvh_width not in layout.BVH_WIDTHS:
@@ -106,6 +108,9 @@ class ScenePacker:
         self.tlas_margin = tlas_margin
         #: The top-level tree over the instance rows (``tlas_nodes``), kept in step with them.
         self.tlas = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
+        #: Children per node of the packed top-level tree (``tlas_nodes``, :mod:`engine.tlas_wide`).
+        self.tlas_width = tlas_width
+        self.tlas_wide = WideTlas.of(self.tlas, tlas_width)
         #: The portal and aberration rows and the trees over them (``space_nodes``).
         self.space = SpaceTables(precision)
 
@@ -397,18 +402,20 @@ class ScenePacker:
         return table["bounds_min"][index, :3].astype(np.float64), table["bounds_max"][index, :3].astype(np.float64)
 
     def _store_tlas(self) -> None:
+        """The packed table of the whole tree (after a build, a rebuild or an origin shift)."""
         assert self.packed is not None
-        self.packed.tables["tlas_nodes"] = self.tlas.nodes
-        self.packed.counts["tlas_nodes"] = self.tlas.count
+        self.tlas_wide = WideTlas.of(self.tlas, self.tlas_width)
+        self.packed.tables["tlas_nodes"] = self.tlas_wide.nodes
+        self.packed.counts["tlas_nodes"] = self.tlas_wide.count
 
     def _update_tlas(self, rows: list[int]) -> list[TableUpdate]:
         """The tree after instance ``rows`` moved: nothing while they stay in their fat boxes, else the
         refitted node rows, or the whole table when it was rebuilt."""
         changed = self.tlas.update(rows, *self._instance_bounds(rows))
-        self._store_tlas()
         if changed is None:
+            self._store_tlas()
             return [TableUpdate("tlas_nodes")]
-        return [TableUpdate("tlas_nodes", range(n, n + 1)) for n in changed]
+        return [TableUpdate("tlas_nodes", range(n, n + 1)) for n in self.tlas_wide.refit(self.tlas, changed)]
 
     def _pack_materials(self, scene: Scene) -> None:
         assert self.packed is not None

@@ -88,13 +88,16 @@ def space_scene(kind: str, n: int, view: str) -> Scene:
     return scene
 
 
-def loaded(name: str, precision: str, scene: Scene, extra: dict[str, int]) -> tuple[Backend, object]:
+def loaded(
+    name: str, precision: str, scene: Scene, extra: dict[str, int], **packer_options: int
+) -> tuple[Backend, object]:
+    """A backend of ``name`` with ``scene`` uploaded (packed as it asks, ``packer_options`` overriding), its
+    kernels given the ``extra`` defines; and the scene's camera."""
     backend = backend_class(name)(precision=precision)
     backend.extra_defines = dict(extra)  # type: ignore[attr-defined]
-    packer = ScenePacker(
-        precision=backend.precision, camera_relative=backend.camera_relative, bvh_width=backend.bvh_width,
-        bvh_compact=backend.bvh_compact,
-    )  # fmt: skip
+    options = {"bvh_width": backend.bvh_width, "bvh_compact": backend.bvh_compact, "tlas_width": backend.tlas_width}
+    options.update(packer_options)
+    packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative, **options)
     camera = scene_camera(scene)
     updates = packer.sync(scene, camera.position)
     assert packer.packed is not None

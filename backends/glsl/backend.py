@@ -378,6 +378,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             WORLD_FP64=1,
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
+            TLAS_WIDTH=self._tlas_width,
             **self._space,
             WORKGROUP_X=self.workgroup[0],
             WORKGROUP_Y=self.workgroup[1],
@@ -392,6 +393,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         for name in layout.TABLES:
             defines[f"{name.upper()}_STRIDE"] = layout.table_dtype(name, self.precision).itemsize // 16
         defines["BVH_NODES_STRIDE"] = layout.BVH_WIDTHS[self._bvh["BVH_WIDTH"]].itemsize // 16
+        defines["TLAS_NODES_STRIDE"] = layout.BVH_WIDTHS[self._tlas_width].itemsize // 16
         for name, binding in OUTPUT_BINDINGS.items():
             defines[f"{name.upper()}_BINDING"] = binding
             defines[f"WRITE_{name.upper()}"] = int(name in aovs)

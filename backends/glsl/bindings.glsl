@@ -61,7 +61,7 @@ Material fetch_material_(int i) { return Material_from_texels(materials_img, i *
 Instance fetch_instance_(int i) { return Instance_from_texels(instances_img, i * INSTANCES_STRIDE); }
 Aberration fetch_aberration_(int i) { return Aberration_from_texels(aberrations_img, i * ABERRATIONS_STRIDE); }
 Portal fetch_portal_(int i) { return Portal_from_texels(portals_img, i * PORTALS_STRIDE); }
-TlasNode fetch_tlas_node_(int i) { return TlasNode_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
+TlasRow fetch_tlas_node_(int i) { return TlasRow_from_texels(tlas_nodes_img, i * TLAS_NODES_STRIDE); }
 SpaceNode fetch_space_node_(int i) { return SpaceNode_from_texels(space_nodes_img, i * SPACE_NODES_STRIDE); }
 Light fetch_light_(int i) { return Light_from_texels(lights_img, i * LIGHTS_STRIDE); }
 Camera fetch_camera_() { return Camera_from_texels(camera_img, 0); }
@@ -91,7 +91,7 @@ layout(std430, binding = 4) readonly restrict buffer InstanceTable { Instance in
 layout(std430, binding = 5) readonly restrict buffer MaterialTable { Material materials_data[]; };
 layout(std430, binding = 6) readonly restrict buffer AberrationTable { Aberration aberrations_data[]; };
 layout(std430, binding = 7) readonly restrict buffer PortalTable { Portal portals_data[]; };
-layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasNode tlas_nodes_data[]; };
+layout(std430, binding = 8) readonly restrict buffer TlasNodeTable { TlasRow tlas_nodes_data[]; };
 /* A compute shader may have 16 storage blocks (llvmpipe, and most GPUs): the tables a variant never reads are
  * left out, so the 12 tables, the camera and 4 AOV outputs fit where they are needed. */
 #if BVH_WIDTH >= 4

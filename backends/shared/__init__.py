@@ -165,9 +165,9 @@ MIN_TLAS_STACK = 16
 
 
 def tlas_stack_size(nodes: np.ndarray, count: int) -> int:
-    """``TLAS_STACK_SIZE`` for a ``tlas_nodes`` table: its depth fits (a SAH/median tree: about log2 of the
-    instances), rounded up so few variants exist."""
-    return max(MIN_TLAS_STACK, -(-bvh_depth(nodes, count) // 8) * 8)
+    """``TLAS_STACK_SIZE`` for a ``tlas_nodes`` table: its walk's entries fit (a SAH tree: about log2 of the
+    instances, times width - 1 when wide), rounded up so few variants exist."""
+    return max(MIN_TLAS_STACK, -(-stack_entries(nodes, count) // 8) * 8)
 
 
 #: The loops' iterations grow with the portal and box counts at every event; llvmpipe ends every loop of a
@@ -245,6 +245,7 @@ class UploadedScene:
         self._features = Features()
         self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
         self._tlas_stack = MIN_TLAS_STACK
+        self._tlas_width = 2
         self._space: dict[str, int] = {
             "PORTAL_TREE": 0, "BOX_TREE": 0, "SPACE_WIDE": 0, "SPACE_STACK_SIZE": MIN_SPACE_STACK
         }  # fmt: skip
@@ -256,6 +257,7 @@ class UploadedScene:
             self._bvh = bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         if "tlas_nodes" in rewritten:
             self._tlas_stack = tlas_stack_size(packed.tables["tlas_nodes"], packed.counts.get("tlas_nodes", 0))
+            self._tlas_width = layout.bvh_width(packed.tables["tlas_nodes"])
         if rewritten & {"space_nodes", "portals", "aberrations"}:
             self._space = space_defines(packed, self.tree_min, self.space_wide)
         self._counts = dict(packed.counts)

@@ -19,7 +19,7 @@ typedef struct SceneTables {
     __global const Material* materials;
     __global const Aberration* aberrations;
     __global const Portal* portals;
-    __global const TlasNode* tlas_nodes;
+    __global const TlasRow* tlas_nodes;
     __global const TriangleBlock* triangle_blocks;
     __global const SpaceNode* space_nodes;
     __global const Light* lights;

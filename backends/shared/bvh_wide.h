@@ -45,37 +45,9 @@
 #endif
 #define BVH_LANES(M) M(BVH_LANE0) BVH_LANES_1(M)
 
-/* Push child lane L of a wide node if the ray enters its box (BVH_LANE_HIT), keeping this node's
- * pushes sorted with the nearest on top (an insertion step: at most width - 1 moves). A macro: the
- * subset has no way to pass the stack arrays by reference. */
-#define BVH_PUSH(L)                                                                                    \
-    if (BVH_LANE_HIT(L) && sp < BVH_STACK_SIZE) {                                                     \
-        int j = sp;                                                                                    \
-        while (j > base && stack_t[j - 1] < tn.L) {                                                    \
-            stack_t[j] = stack_t[j - 1];                                                               \
-            stack_node[j] = stack_node[j - 1];                                                         \
-            stack_count[j] = stack_count[j - 1];                                                       \
-            j -= 1;                                                                                    \
-        }                                                                                              \
-        stack_t[j] = tn.L;                                                                             \
-        stack_node[j] = node.child.L;                                                                  \
-        stack_count[j] = node.count.L;                                                                 \
-        sp += 1;                                                                                       \
-    }
-/* Pop the next (child, count) still entered before the best hit into first/count; done if none. */
-#define BVH_POP()                                                                                      \
-    {                                                                                                  \
-        bool found = false;                                                                            \
-        while (sp > 0 && !found) {                                                                     \
-            sp -= 1;                                                                                   \
-            if (stack_t[sp] <= best.t) {                                                               \
-                first = stack_node[sp];                                                                \
-                count = stack_count[sp];                                                               \
-                found = true;                                                                          \
-            }                                                                                          \
-        }                                                                                              \
-        done = !found;                                                                                 \
-    }
+/* Push child lane L of a wide node if the ray enters its box; pop the next (core.h's wide steps). */
+#define BVH_PUSH(L) WIDE_PUSH(L, BVH_STACK_SIZE, BVH_LANE_HIT(L))
+#define BVH_POP() WIDE_POP(first, count)
 /* BRUTE_FORCE: the rightmost used slot of node `right` into (c, n) (used slots are a prefix). */
 #define BVH_LAST(L)             \
     if (right.count.L >= 0) {   \
@@ -118,13 +90,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
      * lane), pushes the children hit nearest-on-top and pops the nearest, so children are visited
      * near to far. Stack entries are (child, count, entry t) as in the node. */
     real3 inv = safe_inverse(dd);
-    realw ox = RWS(oo.x);
-    realw oy = RWS(oo.y);
-    realw oz = RWS(oo.z);
-    realw ix = RWS(inv.x);
-    realw iy = RWS(inv.y);
-    realw iz = RWS(inv.z);
-    realw tiny = RWS(REAL_TINY);
+    WIDE_RAY(realw, RWS, oo, inv)
     int stack_node[BVH_STACK_SIZE];
     int stack_count[BVH_STACK_SIZE];
     real stack_t[BVH_STACK_SIZE];
@@ -135,15 +101,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
     while (!done) {
         while (count == 0 && !done) {
             WideNode node = BVH_NODE(first);
-            realw tx0 = (TO_REALW(node.lo_x) - ox) * ix;
-            realw tx1 = (TO_REALW(node.hi_x) - ox) * ix;
-            realw ty0 = (TO_REALW(node.lo_y) - oy) * iy;
-            realw ty1 = (TO_REALW(node.hi_y) - oy) * iy;
-            realw tz0 = (TO_REALW(node.lo_z) - oz) * iz;
-            realw tz1 = (TO_REALW(node.hi_z) - oz) * iz;
-            realw tn = max(max(min(tx0, tx1), min(ty0, ty1)), min(tz0, tz1));
-            realw tf = min(min(max(tx0, tx1), max(ty0, ty1)), max(tz0, tz1));
-            tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;
+            WIDE_SLABS(realw, TO_REALW)
             int base = sp;
             BVH_LANE_HITS
             BVH_LANES(BVH_PUSH)

@@ -339,6 +339,63 @@ bool slab_hit(real2 h, real t_min, real t_max)
         }                                                                                            \
     }
 
+/* A wide visit's slabs (an asset's wide tree, the tree over instances): WIDE_RAY broadcasts the ray's
+ * origin o and inverse direction inv into vectors (W: the lanes' real vector, RWS(s) one with every lane s);
+ * WIDE_SLABS gives every lane's entry tn and exit tf for the boxes of node (TO_W: a node field as W), the
+ * arithmetic of slab() lane by lane, exit widening included. */
+#define WIDE_RAY(W, RWS, o, inv)                                                                       \
+    W ox = RWS(o.x);                                                                                   \
+    W oy = RWS(o.y);                                                                                   \
+    W oz = RWS(o.z);                                                                                   \
+    W ix = RWS(inv.x);                                                                                 \
+    W iy = RWS(inv.y);                                                                                 \
+    W iz = RWS(inv.z);                                                                                 \
+    W tiny = RWS(REAL_TINY);
+#define WIDE_SLABS(W, TO_W)                                                                            \
+    W tx0 = (TO_W(node.lo_x) - ox) * ix;                                                               \
+    W tx1 = (TO_W(node.hi_x) - ox) * ix;                                                               \
+    W ty0 = (TO_W(node.lo_y) - oy) * iy;                                                               \
+    W ty1 = (TO_W(node.hi_y) - oy) * iy;                                                               \
+    W tz0 = (TO_W(node.lo_z) - oz) * iz;                                                               \
+    W tz1 = (TO_W(node.hi_z) - oz) * iz;                                                               \
+    W tn = max(max(min(tx0, tx1), min(ty0, ty1)), min(tz0, tz1));                                      \
+    W tf = min(min(max(tx0, tx1), max(ty0, ty1)), max(tz0, tz1));                                      \
+    tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;
+/* The steps of a wide tree's walk (an asset's in bvh_wide.h, the tree over instances in instances.h) over
+ * the caller's stacks stack_node / stack_count / stack_t, its sp, best, node (the wide record visited),
+ * tn (its lanes' entry t) and base (sp before this visit's pushes). WIDE_PUSH: lane L if HIT (the ray
+ * enters its box), keeping this visit's pushes sorted with the nearest on top and equal entries in lane
+ * order (as a binary step takes child 0 first: a hit that ties one in a later lane, whose entry t rounds a
+ * hair above it, is then never culled), an insertion step of at most width - 1 moves, up to STACK entries. WIDE_POP: the next (child, count) still entered before the best
+ * hit into first, count; done if none. */
+#define WIDE_PUSH(L, STACK, HIT)                                                                       \
+    if ((HIT) && sp < STACK) {                                                                         \
+        int j = sp;                                                                                    \
+        while (j > base && stack_t[j - 1] <= tn.L) {                                                   \
+            stack_t[j] = stack_t[j - 1];                                                               \
+            stack_node[j] = stack_node[j - 1];                                                         \
+            stack_count[j] = stack_count[j - 1];                                                       \
+            j -= 1;                                                                                    \
+        }                                                                                              \
+        stack_t[j] = tn.L;                                                                             \
+        stack_node[j] = node.child.L;                                                                  \
+        stack_count[j] = node.count.L;                                                                 \
+        sp += 1;                                                                                       \
+    }
+#define WIDE_POP(first, count)                                                                         \
+    {                                                                                                  \
+        bool found = false;                                                                            \
+        while (sp > 0 && !found) {                                                                     \
+            sp -= 1;                                                                                   \
+            if (stack_t[sp] <= best.t) {                                                               \
+                first = stack_node[sp];                                                                \
+                count = stack_count[sp];                                                               \
+                found = true;                                                                          \
+            }                                                                                          \
+        }                                                                                              \
+        done = !found;                                                                                 \
+    }
+
 /* The axis of the largest |v| component; ties go to the first (NumPy's argmax). */
 int dominant_axis(real3 v)
 {

@@ -16,9 +16,40 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     return traverse_tree(SCENE_PASS best, sr, oo, dd, root, row, cull, t_min);
 }
 
+#if USE_TLAS && TLAS_WIDTH >= 4
+/* The wide top-level tree's lanes (engine/tlas_wide.py), as bvh_wide.h names an asset tree's: TlasW and
+ * TLAS_INTW its real and int vectors, TLAS_RWS(s) every lane s, TLAS_LANES(M) M of each lane's name;
+ * TLAS_LANE_HITS and TLAS_LANE_HIT(L) whether the ray enters lane L's box within (t_min, best.t]. */
+#if TLAS_WIDTH == 8
+#define TlasW real8
+#define TLAS_INTW int8
+#define TLAS_RWS(s) R8S(s)
+#define TLAS_CONVERT_INTW(v) convert_int8(v)
+#define TO_TLASW(v) TO_REAL8(v)
+#define TLAS_LANES(M) M(s0) M(s1) M(s2) M(s3) M(s4) M(s5) M(s6) M(s7)
+#else
+#define TlasW real4
+#define TLAS_INTW int4
+#define TLAS_RWS(s) R4(s, s, s, s)
+#define TLAS_CONVERT_INTW(v) convert_int4(v)
+#define TO_TLASW(v) TO_REAL4(v)
+#define TLAS_LANES(M) M(x) M(y) M(z) M(w)
+#endif
+#ifdef __OPENCL_VERSION__
+#define TLAS_LANE_HITS                                                                                  \
+    TLAS_INTW hit = TLAS_CONVERT_INTW(tf >= max(tn, TLAS_RWS(t_min))) &                                \
+                    TLAS_CONVERT_INTW(tn <= TLAS_RWS(best.t)) & (node.count >= (TLAS_INTW)(0));
+#define TLAS_LANE_HIT(L) (hit.L != 0)
+#else
+#define TLAS_LANE_HITS
+#define TLAS_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t)
+#endif
+#define TLAS_PUSH(L) WIDE_PUSH(L, TLAS_STACK_SIZE, TLAS_LANE_HIT(L))
+#endif
+
 /* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
- * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py), nearest child first;
- * each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
+ * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py; TLAS_WIDTH 4 or 8: its
+ * wide nodes, engine/tlas_wide.py), nearest child first; each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
  * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
  * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
 FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
@@ -33,7 +64,36 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         return best; /* a zero or NaN direction hits nothing */
     }
     real3 inv = safe_inverse(d);
-#if USE_TLAS
+#if USE_TLAS && TLAS_WIDTH >= 4
+    /* As an asset's wide tree (bvh_wide.h): a visit slabs every lane at once, pushes those entered
+     * nearest-on-top and pops the nearest; a popped lane of kind (its count) 1 is instance row first. */
+    WIDE_RAY(TlasW, TLAS_RWS, o, inv)
+    int stack_node[TLAS_STACK_SIZE];
+    int stack_count[TLAS_STACK_SIZE];
+    real stack_t[TLAS_STACK_SIZE];
+    int sp = 0;
+    int first = 0;
+    int kind = 0;
+    bool done = false;
+    while (!done) {
+        while (kind == 0 && !done) {
+            TlasRow node = TLAS_NODE(first);
+            WIDE_SLABS(TlasW, TO_TLASW)
+            int base = sp;
+            TLAS_LANE_HITS
+            TLAS_LANES(TLAS_PUSH)
+            WIDE_POP(first, kind)
+        }
+        if (!done) {
+            /* A leaf: its instance, culled by the exact bounds on the instance row (a moved one's lane is fat). */
+            real2 h = slab(o, inv, INSTANCE(first).bounds_min.xyz, INSTANCE(first).bounds_max.xyz);
+            if (slab_hit(h, t_min, best.t)) {
+                best = trace_instance(SCENE_PASS best, first, o, d, t_min);
+            }
+            WIDE_POP(first, kind)
+        }
+    }
+#elif USE_TLAS
     int stack_node[TLAS_STACK_SIZE];
     real stack_t[TLAS_STACK_SIZE];
     int sp = 0;

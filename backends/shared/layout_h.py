@@ -76,9 +76,23 @@ def texel_reader(record: Record) -> str:
     return f"#define {record.struct}_from_texels(img, b) {record.struct}( \\\n    {args})\n"
 
 
+def _row_choice(name: str, choices: list[tuple[str, Record]]) -> list[str]:
+    """``#define name`` (and ``name_from_texels``) as the record of the first ``(condition, record)`` that
+    holds (an empty condition: the last, the default)."""
+    lines = []
+    for index, (condition, record) in enumerate(choices):
+        lines.append(f"#if {condition}" if index == 0 else f"#elif {condition}" if condition else "#else")
+        lines.append(f"#define {name} {record.struct}")
+        if not _opencl_only(record):
+            lines.append(f"#define {name}_from_texels {record.struct}_from_texels")
+    return [*lines, "#endif"]
+
+
 def _bvh_row() -> str:
     """``BvhRow``, the ``bvh_nodes`` record of this variant's ``BVH_WIDTH`` / ``BVH_COMPACT`` (the packer's
-    ``bvh_width`` and ``bvh_compact``, read back from the table's dtype by ``layout.bvh_width``)."""
+    ``bvh_width`` and ``bvh_compact``, read back from the table's dtype by ``layout.bvh_width``); and
+    ``TlasRow``, the ``tlas_nodes`` record of its ``TLAS_WIDTH`` (:mod:`engine.tlas_wide`: the wide asset
+    trees' records)."""
     wide = [(f"BVH_WIDTH == {width}", layout.BVH_RECORDS[width]) for width in sorted(layout.BVH_RECORDS)[:0:-1]]
     choices = [*wide, ("BVH_COMPACT", layout.BVH_COMPACT_NODE), ("", layout.BVH_RECORDS[2])]
     lines = [
@@ -88,20 +102,20 @@ def _bvh_row() -> str:
         "#ifndef BVH_COMPACT",
         "#define BVH_COMPACT 0",
         "#endif",
+        "#ifndef TLAS_WIDTH",
+        "#define TLAS_WIDTH 2",
+        "#endif",
     ]
-    for index, (condition, record) in enumerate(choices):
-        lines.append(f"#if {condition}" if index == 0 else f"#elif {condition}" if condition else "#else")
-        lines.append(f"#define BvhRow {record.struct}")
-        if not _opencl_only(record):
-            lines.append(f"#define BvhRow_from_texels {record.struct}_from_texels")
-    lines.append("#endif")
+    lines += _row_choice("BvhRow", choices)
+    tlas = [(f"TLAS_WIDTH == {width}", layout.BVH_RECORDS[width]) for width in (8, 4)]
+    lines += _row_choice("TlasRow", [*tlas, ("", layout.TLAS_NODE)])
     return "\n".join(lines) + "\n"
 
 
 @cache
 def layout_h() -> str:
     """The whole ``layout.h``: every record of :data:`engine.layout.RECORDS`, the kernel constants, the
-    image readers (GLSL) and ``BvhRow``."""
+    image readers (GLSL), ``BvhRow`` and ``TlasRow``."""
     names = {id(value): name for name, value in vars(layout).items() if isinstance(value, Record)}
     parts = [_HEADER]
     for name, value in layout.KERNEL_CONSTANTS.items():

@@ -20,6 +20,7 @@ from engine.packed import TableUpdate
 from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.tlas import FAT_MARGIN, AabbTree, collect
+from engine.tlas_wide import WideTlas
 
 
 def random_bounds(n: int, seed: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -178,19 +179,55 @@ def move(scene: Scene, name: str, by: tuple[float, float, float]) -> None:
     scene.set(entity, replace(t, position=tuple(np.add(t.position, by))))
 
 
+def check_wide(wide: WideTlas, tree: AabbTree) -> None:
+    """The wide table is the binary tree's: each instance row in one leaf lane, each lane's box its binary
+    node's (refits included), interior lanes naming later rows, empty lanes last in their row."""
+    width, nodes = wide.width, wide.nodes
+    if width == 2:
+        assert nodes is tree.nodes and wide.count == tree.count
+        return
+    kind = nodes["count"].reshape(len(nodes), width)
+    child = nodes["child"].reshape(len(nodes), width)
+    assert sorted(child[kind == 1]) == list(range(len(tree.leaf)))
+    inner = child[kind == 0]
+    assert sorted(inner) == list(range(1, len(nodes))) and np.all(inner > np.nonzero(kind == 0)[0])
+    assert np.all(np.diff(kind == -1, axis=1) >= 0)  # used lanes are a prefix
+    for node in np.flatnonzero(wide.lane >= 0):
+        row, k = divmod(int(wide.lane[node]), width)
+        for axis, name in enumerate("xyz"):
+            assert nodes[f"lo_{name}"][row].reshape(-1)[k] == tree.nodes["bounds_min"][node, axis]
+            assert nodes[f"hi_{name}"][row].reshape(-1)[k] == tree.nodes["bounds_max"][node, axis]
+    leaves = np.flatnonzero(tree.nodes["count"] > 0)
+    assert np.all(wide.lane[leaves] >= 0)
+
+
 def packed_tree_is_valid(packer: ScenePacker) -> None:
     packed = packer.packed
     assert packed is not None
     n = packed.counts["instances"]
     table = packed.tables["instances"]
     check_tree(packer.tlas, table["bounds_min"][:n, :3].astype(float), table["bounds_max"][:n, :3].astype(float))
-    assert packed.tables["tlas_nodes"] is packer.tlas.nodes
-    assert packed.counts["tlas_nodes"] == max(0, 2 * n - 1)
+    assert packed.tables["tlas_nodes"] is packer.tlas_wide.nodes
+    assert packed.counts["tlas_nodes"] == len(packer.tlas_wide.nodes)
+    check_wide(packer.tlas_wide, packer.tlas)
 
 
-def test_packer_small_move_one_instance_row_large_move_a_few_tree_rows() -> None:
+@pytest.mark.parametrize("width", [4, 8])
+@pytest.mark.parametrize("n", [0, 1, 2, 5, 40, 300])
+def test_wide_tree_holds_the_binary_trees_boxes(width: int, n: int) -> None:
+    tree = AabbTree.build(*random_bounds(n))
+    wide = WideTlas.of(tree, width)
+    if n == 0:
+        assert wide.count == 0 and len(wide.nodes) == 1 and np.all(wide.nodes["count"] == -1)
+        return
+    check_wide(wide, tree)
+    assert len(wide.nodes) < max(2, len(tree.nodes) / (width - 2))  # about (n - 1) / (width - 1) rows
+
+
+@pytest.mark.parametrize("width", [2, 4, 8])
+def test_packer_small_move_one_instance_row_large_move_a_few_tree_rows(width: int) -> None:
     scene = many_boxes()
-    packer = ScenePacker()
+    packer = ScenePacker(tlas_width=width)
     packer.sync(scene)
     packed_tree_is_valid(packer)
     row = packer._instance_row[scene.entity("box7")]
@@ -205,14 +242,15 @@ def test_packer_small_move_one_instance_row_large_move_a_few_tree_rows() -> None
     assert updates[0] == TableUpdate("instances", range(row, row + 1))
     tree_rows = [u.rows for u in updates if u.table == "tlas_nodes"]
     assert {u.table for u in updates} == {"instances", "tlas_nodes"} and all(r is not None for r in tree_rows)
-    assert 2 <= sum(len(r) for r in tree_rows) <= packer.tlas.depth  # the leaf and some of its ancestors
+    assert 1 <= sum(len(r) for r in tree_rows) <= packer.tlas.depth  # the leaf's row and some of its ancestors
     packed_tree_is_valid(packer)
     assert packer.sync(scene) == []
 
 
-def test_packer_rebuilds_on_added_deleted_or_many_moved_instances() -> None:
+@pytest.mark.parametrize("width", [2, 8])
+def test_packer_rebuilds_on_added_deleted_or_many_moved_instances(width: int) -> None:
     scene = many_boxes()
-    packer = ScenePacker()
+    packer = ScenePacker(tlas_width=width)
     packer.sync(scene)
     scene.add_mesh("extra", "sphere", position=(0.0, 4.0, -3.0))
     assert TableUpdate("tlas_nodes") in packer.sync(scene)
@@ -227,9 +265,10 @@ def test_packer_rebuilds_on_added_deleted_or_many_moved_instances() -> None:
     packed_tree_is_valid(packer)
 
 
-def test_origin_shift_moves_the_tree_with_the_instances() -> None:
+@pytest.mark.parametrize("width", [2, 8])
+def test_origin_shift_moves_the_tree_with_the_instances(width: int) -> None:
     scene = many_boxes()
-    packer = ScenePacker(origin_cell=4.0)
+    packer = ScenePacker(origin_cell=4.0, tlas_width=width)
     packer.sync(scene)
     camera = scene.camera_entity
     t = scene.get(camera, Transform)
@@ -256,7 +295,7 @@ def test_moved_instances_render_as_the_reference_sees_them(backend_factory, back
         for name, by in (("box1", (0.02, 0.0, 0.0)), ("box2", (-4.0, 1.0, 2.0)), ("box9", (3.0, -1.0, -5.0))):
             move(scene, name, by)
             uploader.sync(scene)
-        tree = uploader.packer.tlas.nodes
+        tree = uploader.packer.tlas_wide.nodes
         assert backend.read_table("tlas_nodes")[: tree.nbytes] == tree.tobytes()
         fast = backend.render(scene_camera(scene), *size, AOVS)
         truth = upload_to_reference(scene).render(scene_camera(scene), *size, AOVS)
