@@ -440,10 +440,13 @@ class GlslBackend(shared.UploadedScene, Backend):
         with self._current():
             ctx = self._context()
             self._ensure_outputs(width, height, aovs)
-            program = self._program(self._defines(aovs, self._frame_features(camera, width, height)))
             row = pack_camera(
                 camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
             )
+            features = self._frame_features(camera, width, height)
+            defines = self._defines(aovs, features)
+            defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
+            program = self._program(defines)
             if self.table_store == "image":
                 camera_image = _image_of(self._camera)
                 _write_texels(camera_image, 0, row.view(np.uint32).reshape(-1, 4))

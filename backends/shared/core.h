@@ -68,6 +68,10 @@
  *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); 0 for A/B only
+ *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
+ *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
+ *                      gap test true for every face event of the frame, so the containing_box loop after a face
+ *                      compiles out (GLSL per frame, where llvmpipe would run that code masked for every ray)
  *   SPACE_WALK         1: the legs those clearances prove free of meshes are crossed in a loop of their
  *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
  *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
@@ -146,6 +150,12 @@
 #endif
 #ifndef CAMERA_CLEAR_SEARCH
 #define CAMERA_CLEAR_SEARCH 1
+#endif
+#ifndef CAMERA_BOX_ENTRY
+#define CAMERA_BOX_ENTRY 1
+#endif
+#ifndef FACE_NEXT_ONLY
+#define FACE_NEXT_ONLY 0
 #endif
 #ifndef SPACE_WALK
 #define SPACE_WALK 1
