@@ -95,7 +95,7 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
     best = box_faces(SCENE_PASS best, leaf, o, r, t_min, skip);
     SPACE_LEAVES_END
 #else
-    int count = SETTINGS.counts.y;
+    int count = BOX_ROWS;
     for (int b = 0; b < count; ++b) {
         best = box_faces(SCENE_PASS best, b, o, r, t_min, skip);
     }
@@ -148,7 +148,7 @@ int containing_box(SCENE_DECL real3 p)
         }
     }
 #else
-    int count = SETTINGS.counts.y;
+    int count = BOX_ROWS;
     for (int b = 0; b < count; ++b) {
         if (box_holds(SCENE_PASS b, p)) {
             found = b;

@@ -64,6 +64,9 @@
  *                      loop over all; BOX_TREE the same for box faces and the box holding a point; the
  *                      host sets them above a few portals / boxes, where the tree is faster
  *   SPACE_STACK_SIZE   their traversal stack; the host sizes it to the deeper tree's depth
+ *   PORTAL_COUNT       the live portal rows, BOX_COUNT the box rows, where the loops find them (no tree) and
+ *                      the host compiles the count in (GLSL: llvmpipe then unrolls the loops, no settings
+ *                      load); -1 (default): the loops read the settings row's counts
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
  *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
@@ -134,6 +137,15 @@
 #ifndef SPACE_STACK_SIZE
 #define SPACE_STACK_SIZE 16
 #endif
+
+#ifndef PORTAL_COUNT
+#define PORTAL_COUNT -1
+#endif
+#ifndef BOX_COUNT
+#define BOX_COUNT -1
+#endif
+#define PORTAL_ROWS (PORTAL_COUNT >= 0 ? PORTAL_COUNT : SETTINGS.counts.z)
+#define BOX_ROWS (BOX_COUNT >= 0 ? BOX_COUNT : SETTINGS.counts.y)
 
 #ifndef HAS_METRIC
 #define HAS_METRIC 0

@@ -4,8 +4,8 @@ The host proves a mesh search empty (a segment inside a box clear of every insta
 nearer than the camera's clearance) and a box look-up decided by the crossed face (a box farther than the
 nudge from every other box). Here: the bounds are lower bounds and vanish where they must (overlapping
 boxes, an instance moved into a box, incrementally), and the frames are bit-identical with the shortcuts
-on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, and the box code a frame compiles out: FACE_NEXT_ONLY,
-CAMERA_BOX_ENTRY) in every fast backend, f32 and f64.
+on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, the box code a frame compiles out: FACE_NEXT_ONLY,
+CAMERA_BOX_ENTRY, and the loops' compiled-in counts PORTAL_COUNT, BOX_COUNT) in every fast backend, f32 and f64.
 """
 
 from __future__ import annotations
@@ -36,7 +36,10 @@ FAST = [
     pytest.param("opencl", "f32", id="opencl-f32"),
     pytest.param("opencl", "f64", id="opencl-f64"),
 ]
-OFF = {"SKIP_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1}
+OFF = {
+    "SKIP_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1, "PORTAL_COUNT": -1,
+    "BOX_COUNT": -1,
+}  # fmt: skip
 
 
 Vec3 = tuple[float, float, float]
