@@ -68,7 +68,7 @@
  *                      the host compiles the count in (GLSL: llvmpipe then unrolls the loops, no settings
  *                      load); -1 (default): the loops read the settings row's counts
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
- *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
+ *                      the camera row's lens.z with CAMERA_CLEAR_SEARCH 1); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); 0 for A/B only
  *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the

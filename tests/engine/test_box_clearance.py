@@ -37,8 +37,8 @@ FAST = [
     pytest.param("opencl", "f64", id="opencl-f64"),
 ]
 OFF = {
-    "SKIP_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1, "PORTAL_COUNT": -1,
-    "BOX_COUNT": -1,
+    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1,
+    "PORTAL_COUNT": -1, "BOX_COUNT": -1,
 }  # fmt: skip
 
 
