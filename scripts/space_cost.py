@@ -4,7 +4,7 @@ An interleaved A/B in one process: ``ten-boxes`` and ``ten-boxes-aberration`` / 
 (aberrant/bench/scenes.py), each scene once per variant (extra defines, e.g. ``walk-off:SPACE_WALK=0``),
 their frames alternating; each ratio is the median of the paired ratios of CPU time (the process's, every
 driver thread included: steadier than wall time on a shared machine). Also says whether each variant's
-image equals the base variant's.
+image equals the base variant's, and the plain scene's (a part compiled out that leaves the rays straight).
 
     python scripts/space_cost.py --backends opencl glsl --variant walk-off:SPACE_WALK=0 --pairs 15
 """
@@ -63,9 +63,11 @@ def main() -> int:
             for s, v, *_ in units[1:]:
                 t = np.array(times[(s, v)])
                 same = np.array_equal(images[(s, v)], images[(s, "base")])
+                plain_image = np.array_equal(images[(s, v)], images[("plain", "base")])
                 print(
                     f"  {s:10s} {v:12s} {np.median(t / plain):.3f}x plain, "
-                    f"{np.median(t / np.array(times[(s, 'base')])):.3f}x base, image as base: {same}",
+                    f"{np.median(t / np.array(times[(s, 'base')])):.3f}x base, image as base: {same}, "
+                    f"as the plain one: {plain_image}",
                     flush=True,
                 )
         finally:

@@ -40,6 +40,7 @@ void main()
     ivec2 p = ivec2(gl_WorkGroupID.xy * uvec2(WORKGROUP_X, WORKGROUP_Y) + local);
 #endif
     Camera cam = CAMERA_ROW;
+    HELD_BOX_
     if (p.x >= cam.size.x || p.y >= cam.size.y) {
         return;
     }

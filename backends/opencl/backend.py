@@ -373,11 +373,6 @@ class OpenClBackend(shared.UploadedScene, Backend):
             # (PoCL 3.1, 800x800 ten boxes / 10k / 200k triangles): GPUs only, as the GLSL backend does.
             EDGE_FALLBACK_FP64=int(self.fp64 and not self.device.type & self._cl.device_type.CPU),
             WORLD_FP64=int(self.fp64),
-            # The first leg's search skipped within the camera's clearance: with portals alone PoCL's code for
-            # the test costs more than it saves (interleaved A/B, CPU time: 64 portals in view behind a wall
-            # -11 %, ten-boxes-portals -5 %), with boxes it gains (64 and 1,024 boxes behind a wall +7-9 %,
-            # ten-boxes-aberration +2 %).
-            CAMERA_CLEAR_SEARCH=int(bool(features.aberration_modes)),
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
             TLAS_WIDTH=self._tlas_width,

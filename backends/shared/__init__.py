@@ -219,6 +219,11 @@ def space_defines(packed: PackedScene, tree_min: tuple[int, int], wide: bool = F
     }
 
 
+#: The kernels' NUDGE_RELATIVE (core.h) by precision: the active box after an event is looked up this far
+#: (times max(1, |o| + t)) past it.
+FACE_NUDGE: dict[str, float] = {"f32": 5.0e-5, "f64": 1.0e-8}
+
+
 #: The smallest stack of the trees over portals and boxes.
 MIN_SPACE_STACK = 16
 
@@ -242,6 +247,8 @@ class UploadedScene:
         self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
         self._portal_root: int | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
+        self._box_gap = 0.0
+        self._reach = 0.0
         self._features = Features()
         self._bvh: dict[str, int] = {"BVH_WIDTH": 2, "BVH_COMPACT": 0, "BVH_STACK_SIZE": MIN_STACK}
         self._tlas_stack = MIN_TLAS_STACK
@@ -271,8 +278,32 @@ class UploadedScene:
         self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
+        # ... and what FACE_NEXT_ONLY's proof needs: the boxes' least gap, the largest |p| of what rays meet.
+        self._box_gap = float(self._boxes["rotation"][:, 1, 3].min()) if self._boxes.size else 0.0
+        corners = [self._bounds[0], self._bounds[1]]
+        for root in (self._portal_root, self._box_tree[1] if self._box_tree else None):
+            if root is not None:
+                corners += [nodes["bounds_min"][root].astype(np.float64), nodes["bounds_max"][root].astype(np.float64)]
+        self._reach = max(float(np.abs(c).max(initial=0.0)) for c in corners) * 3.0**0.5
         self._features = packed.features
         self._uploaded = True
+
+    def _frame_space_defines(self, features: Features, row: np.ndarray, precision: str) -> dict[str, int]:
+        """Box code a frame provably never runs, compiled out (CAMERA_BOX_ENTRY, FACE_NEXT_ONLY in core.h): where
+        llvmpipe runs every branch masked for all its lanes. ``row``: the frame's camera row (pack_camera).
+
+        The gap test after a face (box_after_face) compares a box's gap with 2 nudges of |o| + t: a leg starts
+        at the camera or on a portal, box or instance (within reach R of the packed origin) and its face lies
+        within 2 R of that start, so |o| + t <= 3 R / |r|; it holds for every face when the least gap exceeds
+        that with a factor 2 of margin (|r| is 1 within rounding)."""
+        if not features.aberration_modes:
+            return {}
+        reach = max(self._reach, float(np.linalg.norm(row["position"][0, :3])))
+        nudge = FACE_NUDGE[precision] * max(1.0, 4.0 * reach)
+        return {
+            "CAMERA_BOX_ENTRY": int(row["size"][0, 2] != -1),
+            "FACE_NEXT_ONLY": int(np.isfinite(self._box_gap) and self._box_gap > 4.0 * nudge),
+        }
 
     def _frame_features(self, camera: CameraView, width: int, height: int) -> Features:
         """The features a frame needs: none of the space's where the host proves that no primary ray meets a

@@ -95,7 +95,7 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
     best = box_faces(SCENE_PASS best, leaf, o, r, t_min, skip);
     SPACE_LEAVES_END
 #else
-    int count = SETTINGS.counts.y;
+    int count = BOX_ROWS;
     for (int b = 0; b < count; ++b) {
         best = box_faces(SCENE_PASS best, b, o, r, t_min, skip);
     }
@@ -148,7 +148,7 @@ int containing_box(SCENE_DECL real3 p)
         }
     }
 #else
-    int count = SETTINGS.counts.y;
+    int count = BOX_ROWS;
     for (int b = 0; b < count; ++b) {
         if (box_holds(SCENE_PASS b, p)) {
             found = b;
@@ -171,12 +171,17 @@ int box_after(SCENE_DECL real3 o, real3 r, real o_len, real t)
 int box_after_face(SCENE_DECL real3 o, real3 r, real o_len, real r_len, Event face)
 {
     real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + face.t);
+#if FACE_NEXT_BOX && FACE_NEXT_ONLY
+    /* The host proved the gap test true for every face event of the frame: the loop is dead code. */
+    return face.t + nudge <= face.far ? face.row / BOX_FACES : -1;
+#else
 #if FACE_NEXT_BOX
     if (face.gap > REAL(2.0f) * nudge * r_len) {
         return face.t + nudge <= face.far ? face.row / BOX_FACES : -1;
     }
 #endif
     return containing_box(SCENE_PASS o + (face.t + nudge) * r);
+#endif
 }
 
 bool zero_deformation(Aberration box)

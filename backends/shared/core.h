@@ -66,10 +66,17 @@
  *   SPACE_WIDE         1: the rays walk those trees' 4-wide forms (space_nodes from space_roots.z / .w,
  *                      engine/space_wide.py; OpenCL); 0: the binary trees
  *   SPACE_STACK_SIZE   their traversal stack; the host sizes it to the deeper tree's depth
+ *   PORTAL_COUNT       the live portal rows, BOX_COUNT the box rows, where the loops find them (no tree) and
+ *                      the host compiles the count in (GLSL: llvmpipe then unrolls the loops, no settings
+ *                      load); -1 (default): the loops read the settings row's counts
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
- *                      the camera row's lens.z where CAMERA_CLEAR_SEARCH is 1: GLSL); FACE_NEXT_BOX 1: the
+ *                      the camera row's lens.z with CAMERA_CLEAR_SEARCH 1); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); 0 for A/B only
+ *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
+ *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
+ *                      gap test true for every face event of the frame, so the containing_box loop after a face
+ *                      compiles out (GLSL per frame, where llvmpipe would run that code masked for every ray)
  *   SPACE_WALK         1: the legs those clearances prove free of meshes are crossed in a loop of their
  *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
  *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
@@ -133,6 +140,15 @@
 #define SPACE_STACK_SIZE 16
 #endif
 
+#ifndef PORTAL_COUNT
+#define PORTAL_COUNT -1
+#endif
+#ifndef BOX_COUNT
+#define BOX_COUNT -1
+#endif
+#define PORTAL_ROWS (PORTAL_COUNT >= 0 ? PORTAL_COUNT : SETTINGS.counts.z)
+#define BOX_ROWS (BOX_COUNT >= 0 ? BOX_COUNT : SETTINGS.counts.y)
+
 #ifndef HAS_METRIC
 #define HAS_METRIC 0
 #endif
@@ -148,6 +164,12 @@
 #endif
 #ifndef CAMERA_CLEAR_SEARCH
 #define CAMERA_CLEAR_SEARCH 1
+#endif
+#ifndef CAMERA_BOX_ENTRY
+#define CAMERA_BOX_ENTRY 1
+#endif
+#ifndef FACE_NEXT_ONLY
+#define FACE_NEXT_ONLY 0
 #endif
 #ifndef SPACE_WALK
 #define SPACE_WALK 1

@@ -88,7 +88,7 @@ STRUCT_END(LegEvents)
 /* 1. The nearest linked portal quad and box face past the point the ray leaves (t_from along the leg) by
  * t_min, skipping the surface it leaves; the mesh search's limit and whether the host's clearances prove
  * it empty. */
-FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray, real camera_clearance)
+FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray)
 {
     LegEvents ev;
     ev.t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
@@ -108,10 +108,17 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray, real camera_clearance)
         ev.search = !(ev.face.clear > REAL(2.0f) * tie * ray.r_len);
     }
 #endif
+    return ev;
+}
+
+/* leg_events for the first leg (no event yet), which starts where clear says (the camera's clearance to
+ * every instance, lens.z from the host; 0 for none): a search that ends (with the tie window for rounding)
+ * nearer than that finds nothing. Only here, so the crossings' code does not carry the test. */
+FORCE_INLINE LegEvents first_leg_events(SCENE_DECL Ray ray, real clear)
+{
+    LegEvents ev = leg_events(SCENE_PASS ray);
 #if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH
-    /* The first leg (no event yet) starts at the camera: a search that ends (with the tie window for
-     * rounding) nearer than the camera's clearance to every instance (lens.z, from the host) finds nothing. */
-    if (ray.n == 0 && (ev.t_cut + REAL(2.0f) * tie_window(ray.o_len, ev.t_cut)) * ray.r_len < camera_clearance) {
+    if ((ev.t_cut + REAL(2.0f) * tie_window(ray.o_len, ev.t_cut)) * ray.r_len < clear) {
         ev.search = false;
     }
 #endif
@@ -208,7 +215,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
 #if HAS_SPACE
     /* Each leg's events, found once: here for the first leg, after each crossing for the next. */
-    LegEvents ev = leg_events(SCENE_PASS ray, clear);
+    LegEvents ev = first_leg_events(SCENE_PASS ray, clear);
 #endif
     /* Each pass of the event loop searches one leg for a mesh and either ends the ray or counts an event, so
      * MAX_EVENTS + 1 passes always suffice. A leg that ends on a portal or box face leaves that event to cross
@@ -239,7 +246,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         if (walk) {
             do {
                 ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
-                ev = leg_events(SCENE_PASS ray, clear);
+                ev = leg_events(SCENE_PASS ray);
                 kind = leg_event_kind(ev, none, ray.o_len);
                 walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
             } while (walk);
@@ -247,7 +254,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
 #else
         if (pending) {
             ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
-            ev = leg_events(SCENE_PASS ray, clear);
+            ev = leg_events(SCENE_PASS ray);
         }
 #endif
 #endif

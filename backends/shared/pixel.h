@@ -16,11 +16,13 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     real3 sigma_hi = cam.sigma_max.xyz;
     /* The camera's box, the same for every ray unless the camera is near a face (the host's camera_box):
      * no box needs no transition at all, and the per-ray look-up runs only where rays may disagree. */
+#if CAMERA_BOX_ENTRY
     int camera_box = cam.size.z;
     if (camera_box != -1) {
         int next = camera_box >= 0 ? camera_box : box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f));
         ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
     }
+#endif
 #endif
     Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX);
     ray = end.ray;

@@ -37,7 +37,7 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
     best = portal_quad(SCENE_PASS best, leaf, o, r, t_min, skip);
     SPACE_LEAVES_END
 #else
-    int count = SETTINGS.counts.z;
+    int count = PORTAL_ROWS;
     for (int p = 0; p < count; ++p) {
         best = portal_quad(SCENE_PASS best, p, o, r, t_min, skip);
     }

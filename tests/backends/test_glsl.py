@@ -91,6 +91,7 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
     if store == "image":
         defines.update(backend._defines(()), TABLES_IN_IMAGES=1, BVH_WIDTH=2, BVH_COMPACT=0)  # whatever it last drew
         defines.update(TLAS_WIDTH=2, TLAS_NODES_STRIDE=layout.TLAS_NODE_DTYPE.itemsize // 16)  # the binary record
+        defines.update(BOX_COUNT=-1)  # every row from the table, none held by main.comp
         if table == "bvh4_nodes":
             defines.update(BVH_WIDTH=4, BVH_NODES_STRIDE=dtype.itemsize // 16)
         if table == "bvh_compact_nodes":

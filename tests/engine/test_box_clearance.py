@@ -4,25 +4,28 @@ The host proves a mesh search empty (a segment inside a box clear of every insta
 nearer than the camera's clearance) and a box look-up decided by the crossed face (a box farther than the
 nudge from every other box). Here: the bounds are lower bounds and vanish where they must (overlapping
 boxes, an instance moved into a box, incrementally), and the frames are bit-identical with the shortcuts
-on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX) in every fast backend, f32 and f64.
+on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, the box code a frame compiles out: FACE_NEXT_ONLY,
+CAMERA_BOX_ENTRY, and the loops' compiled-in counts PORTAL_COUNT, BOX_COUNT) in every fast backend, f32 and f64.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scenes import render_scene
 from test_parity import render
-from test_parity_aberrations import grazing_and_touching, mixed_overlap
+from test_parity_aberrations import camera_in_metric, grazing_and_touching, mixed_overlap
 from test_parity_portals import portal_in_aberrations
 
-from aberrant.bench.scenes import ten_boxes_aberration, ten_boxes_portals
+from aberrant.bench.scenes import ten_boxes, ten_boxes_aberration, ten_boxes_portals
 from backends.base import AOVS, Frame
+from backends.shared import UploadedScene
 from components import Transform
 from engine.box_clearance import camera_clearance, instance_bounds
-from engine.camera_view import scene_camera
+from engine.camera_view import pack_camera, scene_camera
 from engine.clearances import box_clearances
 from engine.packing import ScenePacker
 from engine.scene import Scene
@@ -33,7 +36,10 @@ FAST = [
     pytest.param("opencl", "f32", id="opencl-f32"),
     pytest.param("opencl", "f64", id="opencl-f64"),
 ]
-OFF = {"SKIP_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0}
+OFF = {
+    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1,
+    "PORTAL_COUNT": -1, "BOX_COUNT": -1,
+}  # fmt: skip
 
 
 Vec3 = tuple[float, float, float]
@@ -145,6 +151,34 @@ def test_shortcuts_are_bit_identical(tmp_path, backend_factory, backend_name, pr
         backend.extra_defines = {}
     for name in AOVS:
         assert np.array_equal(frames[0].aov(name), frames[1].aov(name), equal_nan=True), name
+
+
+def frame_space_defines(scene: Scene, position: Vec3 | None = None) -> dict[str, int]:
+    """The box code a GLSL frame of ``scene`` compiles out, seen from its camera or from ``position``."""
+    packer = packer_of(scene)
+    packed = packer.packed
+    uploaded = UploadedScene()
+    uploaded._forget_upload()
+    uploaded._note_upload(packed, set(packed.tables))
+    view = scene_camera(scene)
+    if position is not None:
+        view = replace(view, position=np.asarray(position, dtype=np.float64))
+    row = pack_camera(view, uploaded._origin, "f32", 64, 48, uploaded._boxes, uploaded._bounds, uploaded._box_tree)
+    return uploaded._frame_space_defines(packed.features, row, "f32")
+
+
+def test_a_frame_compiles_out_the_box_code_it_provably_never_runs(tmp_path: Path):
+    """The bench camera starts in no box and its box is alone: both compile out. Overlapping boxes keep the
+    look-up after a face, a camera in a box its entry; a gap proves the look-up dead only for a near camera."""
+    assert frame_space_defines(ten_boxes_aberration(tmp_path)) == {"CAMERA_BOX_ENTRY": 0, "FACE_NEXT_ONLY": 1}
+    assert frame_space_defines(mixed_overlap())["FACE_NEXT_ONLY"] == 0
+    assert frame_space_defines(camera_in_metric())["CAMERA_BOX_ENTRY"] == 1
+    scene = ten_boxes(tmp_path)
+    scene.add_aberration("left", (0.3, 0.0, 0.0), position=(-2.0, 1.0, 0.0), scale=(1.0, 1.0, 1.0))
+    scene.add_aberration("right", (0.3, 0.0, 0.0), position=(2.0, 1.0, 0.0), scale=(1.0, 1.0, 1.0))
+    assert frame_space_defines(scene)["FACE_NEXT_ONLY"] == 1
+    assert frame_space_defines(scene, (0.0, 2.0, 1e5))["FACE_NEXT_ONLY"] == 0
+    assert frame_space_defines(ten_boxes_portals(tmp_path)) == {}
 
 
 def test_the_bench_camera_is_clear(tmp_path: Path):
