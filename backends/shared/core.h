@@ -310,7 +310,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
 /* With shadows, the mesh search (nearest_mesh, trace_instance, traverse_tree) takes a t_stop after its
  * t limits (STOP_DECL, STOP_PASS) and ends as soon as its best hit is nearer than that: after a leaf or an
  * instance, SEARCH_STOP empties the caller's stack when it is. A shadow ray's occlusion test stops at the
- * first hit that decides it (journey.h); camera rays pass -REAL_MAX, never nearer: the nearest hit. */
+ * first hit that decides it (journey.h); camera rays pass -inf, never nearer: the nearest hit. */
 #if HAS_SHADOWS
 #define STOP_DECL , real t_stop
 #define STOP_PASS , t_stop

@@ -283,8 +283,9 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
          * as the nearest one (no farther) would. t_stop lies short of the leg's nearest portal and box face by
          * twice the tie window (its rounding: float32's 1.2e-7 against 2e-5), so the hit comes first with no
          * portal tied to it (leg_event_kind), and short of the reach by a tie window of it, so L + t |r| stays
-         * below the reach whatever the rounding. A hit between t_stop and t_cut searches on for the nearest. */
-        real t_stop = -REAL_MAX;
+         * below the reach whatever the rounding. A hit between t_stop and t_cut searches on for the nearest.
+         * A camera ray's -inf: no t is nearer, so its search's stop tests fold away. */
+        real t_stop = TO_REAL(-F_INF);
         if (occlusion) {
             t_stop = t_cut;
 #if HAS_SPACE
