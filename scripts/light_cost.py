@@ -2,15 +2,16 @@
 
 An interleaved A/B in one process (``space_scale.paired``: samples of a few frames of the two scenes
 alternate on two backends of one kind, the cost the median of the paired ratios of CPU time): the
-space-count sweep's floor and 30 boxes, each with one sun casting shadows against the implicit sun without
-shadows, and any demo from its start (``house``: portals in view, the sun's shadow rays pass them) with its
-Light entities against none (its implicit sun). ``--against REV``: instead, the lit frame with the working
+space-count sweep's floor and 30 boxes, and a floor under a canopy of overlapping boxes (most shadow rays
+blocked), each with one sun casting shadows against the implicit sun without shadows, and any demo from its
+start (``house``: portals in view, the sun's shadow rays pass them) with its Light entities against none
+(its implicit sun). ``--against REV``: instead, the lit frame with the working
 tree's kernels against the same frame with git revision REV's (the kernel files read from git, the generated
 layout.h as now), and whether the two images are bit-identical.
 
     python scripts/light_cost.py --backends opencl glsl --pairs 15
     python scripts/light_cost.py --scenes aberration_tunnels --size 320 --height 240
-    python scripts/light_cost.py --against main --scenes starter house
+    python scripts/light_cost.py --against main --scenes canopy starter house
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 from unittest import mock
+
+import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -41,6 +44,26 @@ def boxes(sun: bool) -> Scene:
     return scene
 
 
+def canopy(sun: bool) -> Scene:
+    """A floor under a canopy of 150 overlapping boxes: most shadow rays are blocked, inside many instances'
+    bounds at once (where stopping at the first hit saves the most)."""
+    scene = Scene("canopy")
+    scene.add_mesh("floor", "plane", scale=(30.0, 1.0, 30.0), checker=1.0)
+    rng = np.random.default_rng(3)
+    for k in range(150):
+        scene.add_mesh(
+            f"leaf{k}",
+            "box",
+            position=(rng.uniform(-6.0, 6.0), rng.uniform(2.0, 4.0), rng.uniform(-8.0, 2.0)),
+            euler_deg=tuple(rng.uniform(0.0, 90.0, 3)),
+            scale=tuple(rng.uniform(0.3, 1.5, 3)),
+        )
+    if sun:
+        scene.add_light("sun", "sun", look_at=(-0.3, -1.0, -0.2))
+    scene.set_camera((0.0, 1.5, 6.0), look_at=(0.0, 0.0, -3.0), fov_deg=60.0)
+    return scene
+
+
 def demo(name: str) -> Callable[[bool], Scene]:
     def build(sun: bool) -> Scene:
         scene = build_demo(name)
@@ -52,7 +75,11 @@ def demo(name: str) -> Callable[[bool], Scene]:
     return build
 
 
-SCENES: dict[str, Callable[[bool], Scene]] = {"boxes": boxes, **{name: demo(name) for name in demo_names()}}
+SCENES: dict[str, Callable[[bool], Scene]] = {
+    "boxes": boxes,
+    "canopy": canopy,
+    **{name: demo(name) for name in demo_names()},
+}
 
 
 def kernels_at(revision: str, backend: str) -> Source:
