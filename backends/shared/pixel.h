@@ -22,7 +22,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
         ray = enter_box(SCENE_PASS ray, REAL(0.0f), next, sigma_lo, sigma_hi);
     }
 #endif
-    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX);
+    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false));
     ray = end.ray;
     MeshHit hit = end.hit;
     if (end.end == END_LIMIT) {
