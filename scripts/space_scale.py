@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,8 @@ from engine.scene import Scene
 
 #: Frames per timed sample (one sample of each scene per pair).
 FRAMES = 3
+#: A backend's kernel source of a variant's defines (``Backend.source``): another revision's kernels.
+Source = Callable[[dict[str, int]], str]
 
 
 def base_scene(name: str) -> Scene:
@@ -89,12 +92,20 @@ def space_scene(kind: str, n: int, view: str) -> Scene:
 
 
 def loaded(
-    name: str, precision: str, scene: Scene, extra: dict[str, int], **packer_options: int
+    name: str,
+    precision: str,
+    scene: Scene,
+    extra: dict[str, int],
+    source: Source | None = None,
+    **packer_options: int,
 ) -> tuple[Backend, object]:
     """A backend of ``name`` with ``scene`` uploaded (packed as it asks, ``packer_options`` overriding), its
-    kernels given the ``extra`` defines; and the scene's camera."""
+    kernels given the ``extra`` defines (``source``: its kernel source in place of the working tree's); and
+    the scene's camera."""
     backend = backend_class(name)(precision=precision)
     backend.extra_defines = dict(extra)  # type: ignore[attr-defined]
+    if source is not None:
+        backend.source = source  # type: ignore[attr-defined]
     options = {"bvh_width": backend.bvh_width, "bvh_compact": backend.bvh_compact, "tlas_width": backend.tlas_width}
     options.update(packer_options)
     packer = ScenePacker(precision=backend.precision, camera_relative=backend.camera_relative, **options)
@@ -106,11 +117,19 @@ def loaded(
 
 
 def paired(
-    name: str, precision: str, scene: Scene, plain: Scene, size: tuple[int, int], pairs: int, extra: dict[str, int]
+    name: str,
+    precision: str,
+    scene: Scene,
+    plain: Scene,
+    size: tuple[int, int],
+    pairs: int,
+    extra: dict[str, int],
+    plain_source: Source | None = None,
 ) -> dict:
-    """Median ratio of frame times, scene over plain, frames alternating; and whether the images match."""
+    """Median ratio of frame times, scene over plain, frames alternating; and whether the images match.
+    plain_source: the plain side's kernel source (another revision's kernels against the working tree's)."""
     a, camera_a = loaded(name, precision, scene, extra)
-    b, camera_b = loaded(name, precision, plain, extra)
+    b, camera_b = loaded(name, precision, plain, extra, plain_source)
     try:
         fa = a.render(camera_a, *size, ("color",))
         fb = b.render(camera_b, *size, ("color",))

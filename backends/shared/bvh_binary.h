@@ -73,7 +73,7 @@ FORCE_INLINE real2 compact_slab(int4 c, CompactFrame f)
 
 /* The ray in object space (oo, dd; sr its sheared form) against the instance's tree from root. */
 FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3 oo, real3 dd, int root, int row,
-                                   bool cull, real t_min)
+                                   bool cull, real t_min STOP_DECL)
 {
 #if BRUTE_FORCE && BVH_COMPACT
     /* As below, through the links: leftmost leaf's first to rightmost leaf's end. */
@@ -158,7 +158,9 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
         for (int k = first; k < end; ++k) {
             best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
         }
-        /* Skip entries entered beyond the best hit, then pop the next one, or done (-1 %). */
+        /* Skip entries entered beyond the best hit, then pop the next one, or done (-1 %; also once the
+         * search stops). */
+        SEARCH_STOP()
         while (sp > 0 && stack_t[sp - 1] > best.t) {
             sp -= 1;
         }
@@ -198,6 +200,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
             for (int k = first; k < first + count; ++k) {
                 best = test_triangle(SCENE_PASS best, sr, k, row, cull, t_min);
             }
+            SEARCH_STOP()
             bool found;
             BINARY_POP(BVH_NODE, found)
             done = !found;

@@ -57,7 +57,7 @@
 
 /* The ray in object space (oo, dd; sr its sheared form) against the instance's tree from root. */
 FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3 oo, real3 dd, int root, int row,
-                                   bool cull, real t_min)
+                                   bool cull, real t_min STOP_DECL)
 {
 #if BRUTE_FORCE
     /* Every triangle between the leftmost and the rightmost leaf's, through the wide tree (slot 0
@@ -112,6 +112,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
             for (int b = first; b < first + (count + 3) / 4; ++b) {
                 best = test_block(SCENE_PASS best, sr, b, row, cull, t_min);
             }
+            SEARCH_STOP()
             BVH_POP()
         }
     }

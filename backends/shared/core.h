@@ -417,6 +417,19 @@ bool slab_hit(real2 h, real t_min, real t_max)
         }                                                                                              \
         done = !found;                                                                                 \
     }
+/* With shadows, the mesh search (nearest_mesh, trace_instance, traverse_tree) takes a t_stop after its
+ * t limits (STOP_DECL, STOP_PASS) and ends as soon as its best hit is nearer than that: after a leaf or an
+ * instance, SEARCH_STOP empties the caller's stack when it is. A shadow ray's occlusion test stops at the
+ * first hit that decides it (journey.h); camera rays pass -inf, never nearer: the nearest hit. */
+#if HAS_SHADOWS
+#define STOP_DECL , real t_stop
+#define STOP_PASS , t_stop
+#define SEARCH_STOP() sp = best.t < t_stop ? 0 : sp;
+#else
+#define STOP_DECL
+#define STOP_PASS
+#define SEARCH_STOP()
+#endif
 
 /* The axis of the largest |v| component; ties go to the first (NumPy's argmax). */
 int dominant_axis(real3 v)

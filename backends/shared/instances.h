@@ -4,7 +4,7 @@
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
  * asset's BVH from its root, nearest child first, with a small stack. */
-FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min)
+FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min STOP_DECL)
 {
     Instance inst = INSTANCE(row);
     real3 oo = R3(dot(inst.w2o0.xyz, o) + inst.w2o0.w, dot(inst.w2o1.xyz, o) + inst.w2o1.w,
@@ -13,7 +13,7 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
     bool cull = MATERIAL(inst.meta.y).flags.x != 0;
     ShearedRay sr = shear_ray(oo, dd);
     int root = inst.meta.x;
-    return traverse_tree(SCENE_PASS best, sr, oo, dd, root, row, cull, t_min);
+    return traverse_tree(SCENE_PASS best, sr, oo, dd, root, row, cull, t_min STOP_PASS);
 }
 
 #if USE_TLAS && TLAS_WIDTH >= 4
@@ -47,12 +47,13 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #define TLAS_PUSH(L) WIDE_PUSH(L, TLAS_STACK_SIZE, TLAS_LANE_HIT(L))
 #endif
 
-/* The nearest triangle hit with t_min < t <= t_max over every instance. USE_TLAS: the instances
+/* The nearest triangle hit with t_min < t <= t_max over every instance, or with shadows the first one
+ * found nearer than t_stop (core.h, SEARCH_STOP). USE_TLAS: the instances
  * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py; TLAS_WIDTH 4 or 8: its
  * wide nodes, engine/tlas_wide.py), nearest child first; each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
  * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
  * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
-FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max)
+FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max STOP_DECL)
 {
     MeshHit best;
     best.t = t_max;
@@ -85,11 +86,13 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
             WIDE_POP(first, kind)
         }
         if (!done) {
-            /* A leaf: its instance, culled by the exact bounds on the instance row (a moved one's lane is fat). */
+            /* A leaf: its instance, culled by the exact bounds on the instance row (a moved one's lane is fat);
+             * then the next lane still entered before the best hit, or done (also once the search stops). */
             real2 h = slab(o, inv, INSTANCE(first).bounds_min.xyz, INSTANCE(first).bounds_max.xyz);
             if (slab_hit(h, t_min, best.t)) {
-                best = trace_instance(SCENE_PASS best, first, o, d, t_min);
+                best = trace_instance(SCENE_PASS best, first, o, d, t_min STOP_PASS);
             }
+            SEARCH_STOP()
             WIDE_POP(first, kind)
         }
     }
@@ -108,12 +111,13 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         }
         if (more) {
             /* A leaf: its instance, culled by the exact bounds on the instance row; then the next node
-             * still entered before the best hit, or done. */
+             * still entered before the best hit, or done (also once the search stops). */
             int row = AS_INT(node.lo.w);
             real2 h = slab(o, inv, INSTANCE(row).bounds_min.xyz, INSTANCE(row).bounds_max.xyz);
             if (slab_hit(h, t_min, best.t)) {
-                best = trace_instance(SCENE_PASS best, row, o, d, t_min);
+                best = trace_instance(SCENE_PASS best, row, o, d, t_min STOP_PASS);
             }
+            SEARCH_STOP()
             BINARY_POP(TLAS_NODE, more)
         }
     }
@@ -121,8 +125,11 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     for (int i = 0; i < count; ++i) {
         real2 h = slab(o, inv, INSTANCE(i).bounds_min.xyz, INSTANCE(i).bounds_max.xyz);
         if (slab_hit(h, t_min, best.t)) {
-            best = trace_instance(SCENE_PASS best, i, o, d, t_min);
+            best = trace_instance(SCENE_PASS best, i, o, d, t_min STOP_PASS);
         }
+#if HAS_SHADOWS
+        i = best.t < t_stop ? count : i;
+#endif
     }
 #endif
     return best;

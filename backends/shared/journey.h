@@ -195,10 +195,20 @@ STRUCT_BEGIN(Journey)
     int end;
 STRUCT_END(Journey)
 
+#if HAS_SHADOWS
+/* With shadows, journey() takes whether it is a shadow ray's occlusion test (true: any mesh hit that ends it
+ * will do, its hit is not the nearest) or a camera ray's (false: the nearest hit, to shade). */
+#define OCCLUSION_DECL , bool occlusion
+#define OCCLUSION_ARG(x) , x
+#else
+#define OCCLUSION_DECL
+#define OCCLUSION_ARG(x)
+#endif
+
 /* A ray's journey from its start, event after event (docs/semantics.md sections 3-13): the camera's rays
  * and the shadow rays take this one. clear: the start's clearance to every instance (the camera's, lens.z;
  * 0 for none); reach: the world path length at which the ray counts as arrived (REAL_MAX for none). */
-FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real reach)
+FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real reach OCCLUSION_DECL)
 {
     Journey trip;
     trip.end = END_MISS;
@@ -276,6 +286,31 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         if (reach < REAL_MAX) {
             t_cut = min(t_cut, (reach - ray.L) / ray.r_len);
         }
+        /* A shadow ray's search may stop at its first hit nearer than t_stop: that hit ends the journey unlit,
+         * as the nearest one (no farther) would. t_stop lies short of the leg's nearest portal and box face by
+         * twice the tie window (its rounding: float32's 1.2e-7 against 2e-5), so the hit comes first with no
+         * portal tied to it (leg_event_kind), and short of the reach by a tie window of it, so L + t |r| stays
+         * below the reach whatever the rounding. A hit between t_stop and t_cut searches on for the nearest.
+         * A camera ray's -inf: no t is nearer, so its search's stop tests fold away. */
+        real t_stop = TO_REAL(-F_INF);
+        if (occlusion) {
+            t_stop = t_cut;
+#if HAS_SPACE
+            real t_event = REAL_MAX;
+#if HAS_PORTALS
+            t_event = min(t_event, ev.portal.t);
+#endif
+#if HAS_ABERRATIONS
+            t_event = min(t_event, ev.face.t);
+#endif
+            if (t_event < REAL_MAX) {
+                t_stop = min(t_stop, t_event - REAL(2.0f) * tie_window(ray.o_len, t_event));
+            }
+#endif
+            if (reach < REAL_MAX) {
+                t_stop = min(t_stop, (reach - ray.L - TIE_RELATIVE * max(REAL(1.0f), reach)) / ray.r_len);
+            }
+        }
 #endif
         /* The mesh search stops where a mesh can no longer win. */
         MeshHit mesh;
@@ -284,7 +319,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         mesh.instance = -1;
         mesh.triangle = -1;
         if (search) {
-            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut);
+            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS);
         }
 #if HAS_SPACE
         kind = leg_event_kind(ev, mesh, ray.o_len);
@@ -333,7 +368,7 @@ FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, rea
     ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)),
                     cam.sigma_min.xyz, cam.sigma_max.xyz);
 #endif
-    int end = journey(SCENE_PASS cam, ray, REAL(0.0f), reach).end;
+    int end = journey(SCENE_PASS cam, ray, REAL(0.0f), reach, true).end;
     return end == END_MISS || end == END_REACHED;
 }
 #endif

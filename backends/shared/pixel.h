@@ -24,7 +24,7 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     }
 #endif
 #endif
-    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX);
+    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false));
     ray = end.ray;
     MeshHit hit = end.hit;
     if (end.end == END_LIMIT) {

@@ -55,16 +55,19 @@ def box_shadow_through_portal() -> Scene:
     return scene
 
 
-def room_lit_through_portal() -> Scene:
-    """A floor under a ceiling (the sky blocked) at x = 100, a 2x2 portal just under the ceiling whose pair
-    lies in the open at x = 0: the sun reaches the floor only through it."""
+def room_lit_through_portal(skylight: float = 2.99, plate: bool = False) -> Scene:
+    """A floor under a ceiling (the sky blocked, its bottom at y = 3) at x = 100, a 2x2 portal at height
+    skylight (just under the ceiling) whose pair lies in the open at x = 0: the sun reaches the floor only
+    through it. plate: a small plate at y = 2 under the skylight, after the ceiling in instance rows."""
     scene = Scene("room lit through a portal")
     scene.add_mesh("floor", "box", position=(100.0, -0.5, 0.0), scale=(40.0, 1.0, 40.0))
     scene.add_mesh("ceiling", "box", position=(100.0, 3.5, 0.0), scale=(40.0, 1.0, 40.0))
     flat = dict(euler_deg=(-90.0, 0.0, 0.0))
     scene.add_portal_pair(
-        "sky", "skylight", a=dict(position=(0.0, 3.0, 0.0), **flat), b=dict(position=(100.0, 2.99, 0.0), **flat)
+        "sky", "skylight", a=dict(position=(0.0, 3.0, 0.0), **flat), b=dict(position=(100.0, skylight, 0.0), **flat)
     )
+    if plate:
+        scene.add_mesh("plate", "box", position=(100.0, 2.0, 0.0), scale=(1.2, 0.05, 1.2))
     scene.add_light("sun", "sun", euler_deg=DOWN)
     scene.set_camera((96.0, 2.0, 4.0), look_at=(100.0, 0.0, 0.0))
     return scene
@@ -180,6 +183,30 @@ def test_every_backend_draws_the_reference_shadows(case, backend, precision, bac
     shade = ref.color[..., :3].astype(int).sum(axis=2)
     floor = ref.instance == scene.entity("floor")
     assert shade[floor].min() < 0.6 * shade[floor].max()  # a shadow is in view
+
+
+@pytest.mark.parametrize(("backend", "precision"), [p for p in FAST if p.id.endswith("f32")])
+def test_a_shadow_ray_stops_at_a_mesh_only_where_the_nearest_hit_would_end_it(
+    backend, precision, backend_factory, scenes
+):
+    # With the skylight 4e-5 inside the ceiling, a shadow ray under it meets the ceiling's bottom face, but the
+    # portal lies within float32's tie window of it (about 2e-4 here; float64's is 1e-8) and takes the leg
+    # (docs/semantics.md section 14): the floor stays lit. Under the plate the plate's hit comes first and
+    # ends the ray, though the instance loop (no top-level tree: rows in order) finds the ceiling's first.
+    tied, clear = room_lit_through_portal(3.00004, plate=True), room_lit_through_portal(plate=True)
+    scenes += [tied, clear]
+    fast = backend_factory(backend, precision)
+    fast.extra_defines = {"USE_TLAS": 0}
+    try:
+        frames = [render_aovs(fast, scene, *SIZE) for scene in (tied, clear)]
+    finally:
+        fast.extra_defines = {}
+    floor = frames[1].instance == clear.entity("floor")
+    shade = [frame.color[..., :3].astype(int).sum(axis=2)[floor] for frame in frames]
+    assert np.mean(np.abs(shade[0] - shade[1]) > 6) <= 0.002  # stopping at the ceiling: 1 % (the plate's shadow)
+    lit = shade[1] > 0.8 * shade[1].max()
+    ref = render_aovs(backend_factory("reference"), clear, *SIZE).color[..., :3].astype(int).sum(axis=2)[floor]
+    assert 0.01 < lit.mean() < 0.5 and np.mean(lit != (ref > 0.8 * ref.max())) <= 0.005  # the plate's shadow too
 
 
 def test_glsl_storage_buffers_draw_the_shadows_its_images_draw(scenes):
