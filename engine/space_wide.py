@@ -13,6 +13,8 @@ inner child's wide node (> 0), ``~row`` of a leaf's portal or box row (< 0), or 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from engine import layout
@@ -73,7 +75,7 @@ class WideTree:
     def _inner(self, binary: np.ndarray) -> np.ndarray:
         return self._child_wide[binary] > 0
 
-    def rows(self, nodes: np.ndarray, base: int, wide: np.ndarray | None = None) -> np.ndarray:
+    def rows(self, nodes: np.ndarray, base: int, wide: Sequence[int] | np.ndarray | None = None) -> np.ndarray:
         """The ``space_nodes`` rows of wide nodes ``wide`` (all by default), the tree stored from row ``base``."""
         wide = np.arange(len(self.slots)) if wide is None else np.asarray(wide, np.int64)
         slots = self.slots[wide]
