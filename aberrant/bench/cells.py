@@ -206,7 +206,19 @@ class CellRunner:
                 return render_samples(backend, camera, width, height, TIMED_AOVS, spp)
 
             if pair is not None:
-                row["embree_paired"] = self._paired(pair, timed_frame)
+                # Embree traces the primary rays only: a scene whose lights cast shadows is paired on its
+                # frame without them, so that both trace the same rays.
+                lit = shadows_off(scene) if setting.shadows else []
+                restore += lit
+                if lit:
+                    uploader.sync(scene, camera.position)
+                    timed_frame()  # the shadow-free variant compiles apart
+                row["embree_paired"] = {**self._paired(pair, timed_frame), "shadows_off": bool(lit)}
+                for entity, light in lit:
+                    scene.set(entity, light)
+                    restore.remove((entity, light))
+                if lit:
+                    uploader.sync(scene, camera.position)
             if baseline is not None:
                 row["baseline_paired"] = self._baseline(setting, baseline, size, baseline_spp, timed_frame)
             self._ticks(scene, camera, uploader, row)

@@ -140,7 +140,8 @@ def _headline(results: dict[str, Any]) -> list[str]:
             elif row["status"] != "ok":
                 cells.append(row["status"].split(":")[0])  # unsupported, error or skipped
             else:
-                ratio = f" ({_ratio(best_ratio(row))})" if row.get("embree_ratio") is not None else ""
+                unlit = "*" if (row.get("embree_paired") or {}).get("shadows_off") else ""
+                ratio = f" ({_ratio(best_ratio(row))}{unlit})" if row.get("embree_ratio") is not None else ""
                 cells.append(f"{_num(row['mrays_per_s'])}{ratio}")
         size = "x".join(map(str, info["fixed_size"] or results["config"]["size"]))
         entry = results["embree"].get(scene, {}).get("sizes", {}).get(size, {})
@@ -151,7 +152,9 @@ def _headline(results: dict[str, Any]) -> list[str]:
         "## Headline: base settings, Mrays/s (ratio to Embree's rays/s)",
         "",
         "Ratios are *paired*: Embree's trace of the same rays alternates with the backend's frames, so both see "
-        "the same background load; the median of the per-pair ratios.",
+        "the same background load; the median of the per-pair ratios. Embree traces the primary rays only, so a "
+        "scene whose lights cast shadows (marked *) is paired on its frame with them off; its Mrays/s are those "
+        "of the frame with them.",
         "",
         *markdown_table(header, rows),
         "",

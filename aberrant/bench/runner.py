@@ -397,6 +397,12 @@ def _ratio(row: dict[str, Any], anchor: dict[str, Any]) -> None:
     if row.get("status") != "ok" or entry.get("status") != "ok":
         row["embree_ratio"], row["embree_note"] = None, entry.get("status", "no embree run at this size")
         return
+    paired = row.get("embree_paired") or {}
+    if paired.get("shadows_off"):  # paired on the frame without shadow rays: its median, not the lit one's
+        width, height = row["size"]
+        row["embree_ratio"] = embree.mrays(paired["frame_ms"], width * height) / entry["mrays_per_s"]
+        row["embree_note"] = "shadows off for the pairing"
+        return
     row["embree_ratio"] = row["mrays_per_s"] / entry["mrays_per_s"]
     row["embree_note"] = ""
 

@@ -106,3 +106,22 @@ def test_a_tiny_run_reports_the_hotel_and_the_embree_ratio_of_a_level(tmp_path):
             and results["embree"]["ground-grid"]["status"] == "ok"
         ):
             assert row["embree_paired"]["ratio"] > 0
+            assert row["embree_paired"]["shadows_off"] is False  # no light: the frame is the one timed
+
+
+@pytest.mark.slow
+def test_a_scene_casting_shadows_meets_embree_on_its_frame_without_them(tmp_path):
+    pytest.importorskip("embreex")
+    out = tmp_path / "report"
+    argv = ["bench", "--scenes", "starter", "--backends", "opencl", "--size", "24x24", "--repeat", "2"]
+    assert main([*argv, "--sweeps", "none", "--no-overhead", "--out", str(out)]) == 0
+    results = json.loads((out / "results.json").read_text())
+    (row,) = [r for r in results["rows"] if r["scene"] == "starter"]
+    if row["status"] != "ok":
+        pytest.skip(f"opencl: {row['status']}")
+    paired = row["embree_paired"]
+    assert paired["shadows_off"] is True
+    assert row["embree_note"] == "shadows off for the pairing"
+    embree_mrays = results["embree"]["starter"]["sizes"]["24x24"]["mrays_per_s"]
+    assert row["embree_ratio"] == pytest.approx(24 * 24 / (1e3 * paired["frame_ms"]) / embree_mrays)
+    assert "x*)" in (out / "report.md").read_text()
