@@ -9,7 +9,7 @@
  * rounding, fused or not, flushed or not, each t contains the t that slab() gives for the decoded
  * box origin + q * scale, BOX_WIDEN included. With m_i = |inv_i| (|origin_i| + |o_i| + 65535
  * |scale_i| + 1e-31), both values are within 6u m_i of the exact one (u = 2^-24) and slab()'s
- * entry or exit widening is at most 8.1u m_i + 5e-37, so w_i = 2^-19 m_i + 1e-32 (32u m_i) covers them
+ * exit widening is at most 8.1u m_i + 5e-37, so w_i = 2^-19 m_i + 1e-32 (32u m_i) covers them
  * (the |inv| 1e-31 and 1e-32 terms cover flushed subnormals). An axis whose m_i is too large
  * for finite t (near-parallel rays in f64) does not cull. So the same nodes (and more by a
  * hair) are visited, and the same triangle wins: frames are bit-identical. */
@@ -161,7 +161,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
         /* Skip entries entered beyond the best hit, then pop the next one, or done (-1 %; also once the
          * search stops). */
         SEARCH_STOP()
-        while (sp > 0 && stack_t[sp - 1] > best.t) {
+        while (sp > 0 && stack_t[sp - 1] > ENTRY_LIMIT(best.t)) {
             sp -= 1;
         }
         done = sp == 0;

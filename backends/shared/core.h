@@ -300,13 +300,10 @@ real3 safe_inverse(real3 d)
     return R3(REAL(1.0f) / x, REAL(1.0f) / y, REAL(1.0f) / z);
 }
 
-/* Entry and exit t of a ray against a box, each widened a few ulps outward (conservative). The entry's
- * widening keeps ties: a triangle on a box face gets its t from other arithmetic than the face's entry, an
- * ulp below it at times, and a box entered a hair after a best hit at that t would be culled, losing a
- * lower instance row's equal hit to the walk's order. The widening is at least BOX_WIDEN * REAL_TINY: a t
- * a hair from 0 (a ray starting on a bound, common where a mesh is split at a coordinate plane through the
- * camera) would otherwise make a subnormal product, which costs a CPU a microcode assist per lane without
- * flush-to-zero. */
+/* Entry and exit t of a ray against a box; the exit is widened a few ulps (conservative). The
+ * widening is at least BOX_WIDEN * REAL_TINY: an exit a hair from 0 (a ray starting on a bound,
+ * common where a mesh is split at a coordinate plane through the camera) would otherwise make a
+ * subnormal product, which costs a CPU a microcode assist per lane without flush-to-zero. */
 real2 slab(real3 o, real3 inv, real3 lo, real3 hi)
 {
     real3 t0 = (lo - o) * inv;
@@ -315,13 +312,19 @@ real2 slab(real3 o, real3 inv, real3 lo, real3 hi)
     real3 tf = max(t0, t1);
     real t_enter = max(max(tn.x, tn.y), tn.z);
     real t_exit = min(min(tf.x, tf.y), tf.z);
-    return R2(t_enter - max(ABS(t_enter), REAL_TINY) * BOX_WIDEN, t_exit + max(ABS(t_exit), REAL_TINY) * BOX_WIDEN);
+    return R2(t_enter, t_exit + max(ABS(t_exit), REAL_TINY) * BOX_WIDEN);
 }
 
-/* Whether a slab interval is crossed within (t_min, t_max]; false on NaN. */
+/* The latest entry t of a box still entered with the best hit at t (> 0): t widened as slab() widens exits.
+ * A triangle on a box face gets its t from other arithmetic than the face's entry, at times an ulp below it;
+ * a box entered a hair after a best hit at that t would be culled, and a lower instance row's equal hit
+ * with it, so the walk's order would decide the tie. One multiply per visit, not one per lane. */
+#define ENTRY_LIMIT(t) ((t) * (REAL(1.0f) + BOX_WIDEN))
+
+/* Whether a slab interval is crossed within (t_min, t_max] (its entry up to ENTRY_LIMIT); false on NaN. */
 bool slab_hit(real2 h, real t_min, real t_max)
 {
-    return h.y >= max(h.x, t_min) && h.x <= t_max;
+    return h.y >= max(h.x, t_min) && h.x <= ENTRY_LIMIT(t_max);
 }
 
 /* The steps of a binary tree's "while-while" traversal (an asset's plain tree, the tree over
@@ -337,7 +340,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
     found = false;                                                                                   \
     while (sp > 0 && !found) {                                                                       \
         sp -= 1;                                                                                     \
-        if (stack_t[sp] <= best.t) {                                                                 \
+        if (stack_t[sp] <= ENTRY_LIMIT(best.t)) {                                                    \
             node = FETCH(stack_node[sp]);                                                            \
             found = true;                                                                            \
         }                                                                                            \
@@ -367,7 +370,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
 /* A wide visit's slabs (an asset's wide tree, the tree over instances): WIDE_RAY broadcasts the ray's
  * origin o and inverse direction inv into vectors (W: the lanes' real vector, RWS(s) one with every lane s);
  * WIDE_SLABS gives every lane's entry tn and exit tf for the boxes of node (TO_W: a node field as W), the
- * arithmetic of slab() lane by lane, widening included. */
+ * arithmetic of slab() lane by lane, exit widening included. */
 #define WIDE_RAY(W, RWS, o, inv)                                                                       \
     W ox = RWS(o.x);                                                                                   \
     W oy = RWS(o.y);                                                                                   \
@@ -385,8 +388,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
     W tz1 = (TO_W(node.hi_z) - oz) * iz;                                                               \
     W tn = max(max(min(tx0, tx1), min(ty0, ty1)), min(tz0, tz1));                                      \
     W tf = min(min(max(tx0, tx1), max(ty0, ty1)), max(tz0, tz1));                                      \
-    tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;                                                          \
-    tn = tn - max(ABS(tn), tiny) * BOX_WIDEN;
+    tf = tf + max(ABS(tf), tiny) * BOX_WIDEN;
 /* The steps of a wide tree's walk (an asset's in bvh_wide.h, the tree over instances in instances.h) over
  * the caller's stacks stack_node / stack_count / stack_t, its sp, best, node (the wide record visited),
  * tn (its lanes' entry t) and base (sp before this visit's pushes). WIDE_PUSH: lane L if HIT (the ray
@@ -413,7 +415,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
         bool found = false;                                                                            \
         while (sp > 0 && !found) {                                                                     \
             sp -= 1;                                                                                   \
-            if (stack_t[sp] <= best.t) {                                                               \
+            if (stack_t[sp] <= ENTRY_LIMIT(best.t)) {                                                  \
                 first = stack_node[sp];                                                                \
                 count = stack_count[sp];                                                               \
                 found = true;                                                                          \
