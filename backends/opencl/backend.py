@@ -71,6 +71,8 @@ KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", *(f"{name}_out" for na
 #: ten-boxes, PoCL 3.1) was within 1 % for traversal cost 0.3, 0.5 or 2.0, and worse for leaves of
 #: 8 triangles (+8 % / +5 %) or 2 (+1 % / +5 %).
 BVH_WIDTH_BY_PRECISION: dict[Precision, int] = {"f32": 8, "f64": 4}
+#: The instance tree's width (OpenClBackend.tlas_width) by precision.
+TLAS_WIDTH_BY_PRECISION: dict[Precision, int] = {"f32": 8, "f64": 4}
 BUILD_OPTIONS: tuple[str, ...] = ("-cl-denorms-are-zero",)
 #: Work-group size on a CPU device (PoCL). Measured on PoCL 3.0, 800x800 frames of three scenes:
 #: None, 8x8, 16x16, 32x8, 32x32 and 64x4 are all within 3 % of each other (the traversal loops keep
@@ -213,8 +215,9 @@ class OpenClBackend(shared.UploadedScene, Backend):
     bvh_width: int = 8
     #: The instance tree 4-wide: against binary, CPU per frame (PoCL, 320x320, interleaved, f32 / f64)
     #: 0.89x / 0.84x on the village, 0.80x / 0.76x on the hotel shut, 0.89x / 0.89x on the starter, 0.82x /
-    #: 0.76x on the house. 8-wide takes a further 3-9 % at f32, but its order flips a tie between two
-    #: instances at equal depth in one demo pixel (endless_corridor, to what the loop over instances gives).
+    #: 0.76x on the house. 8-wide at f32 (float8 lanes) against 4-wide: 0.94x on the village, 0.98x on the
+    #: hotel shut, 0.86x on the starter, 0.93x on the house. At f64 (double8: two AVX registers) it is mixed,
+    #: 0.99x / 1.05x / 0.88x / 0.92x, so f64 keeps 4-wide (TLAS_WIDTH_BY_PRECISION).
     tlas_width: int = 4
 
     def __init__(
@@ -231,6 +234,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         """
         super().__init__(precision)
         self.bvh_width = BVH_WIDTH_BY_PRECISION[self.precision]
+        self.tlas_width = TLAS_WIDTH_BY_PRECISION[self.precision]
         self._cl = _import_cl()
         self._cache_dir = configure_caches()
         self.device: cl.Device = select_device(device, prefer_fp64=self.precision == "f64")

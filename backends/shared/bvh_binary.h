@@ -161,7 +161,7 @@ FORCE_INLINE MeshHit traverse_tree(SCENE_DECL MeshHit best, ShearedRay sr, real3
         /* Skip entries entered beyond the best hit, then pop the next one, or done (-1 %; also once the
          * search stops). */
         SEARCH_STOP()
-        while (sp > 0 && stack_t[sp - 1] > best.t) {
+        while (sp > 0 && stack_t[sp - 1] > ENTRY_LIMIT(best.t)) {
             sp -= 1;
         }
         done = sp == 0;

@@ -36,12 +36,12 @@
 #endif
 #ifdef __OPENCL_VERSION__
 #define BVH_LANE_HITS                                                                                   \
-    intw hit = CONVERT_INTW(tf >= max(tn, RWS(t_min))) & CONVERT_INTW(tn <= RWS(best.t)) &             \
+    intw hit = CONVERT_INTW(tf >= max(tn, RWS(t_min))) & CONVERT_INTW(tn <= RWS(ENTRY_LIMIT(best.t))) &\
                (node.count >= (intw)(0));
 #define BVH_LANE_HIT(L) (hit.L != 0)
 #else
 #define BVH_LANE_HITS
-#define BVH_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t)
+#define BVH_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= ENTRY_LIMIT(best.t))
 #endif
 #define BVH_LANES(M) M(BVH_LANE0) BVH_LANES_1(M)
 

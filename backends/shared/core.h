@@ -315,10 +315,16 @@ real2 slab(real3 o, real3 inv, real3 lo, real3 hi)
     return R2(t_enter, t_exit + max(ABS(t_exit), REAL_TINY) * BOX_WIDEN);
 }
 
-/* Whether a slab interval is crossed within (t_min, t_max]; false on NaN. */
+/* The latest entry t of a box still entered with the best hit at t (> 0): t widened as slab() widens exits.
+ * A triangle on a box face gets its t from other arithmetic than the face's entry, at times an ulp below it;
+ * a box entered a hair after a best hit at that t would be culled, and a lower instance row's equal hit
+ * with it, so the walk's order would decide the tie. One multiply per visit, not one per lane. */
+#define ENTRY_LIMIT(t) ((t) * (REAL(1.0f) + BOX_WIDEN))
+
+/* Whether a slab interval is crossed within (t_min, t_max] (its entry up to ENTRY_LIMIT); false on NaN. */
 bool slab_hit(real2 h, real t_min, real t_max)
 {
-    return h.y >= max(h.x, t_min) && h.x <= t_max;
+    return h.y >= max(h.x, t_min) && h.x <= ENTRY_LIMIT(t_max);
 }
 
 /* The steps of a binary tree's "while-while" traversal (an asset's plain tree, the tree over
@@ -334,7 +340,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
     found = false;                                                                                   \
     while (sp > 0 && !found) {                                                                       \
         sp -= 1;                                                                                     \
-        if (stack_t[sp] <= best.t) {                                                                 \
+        if (stack_t[sp] <= ENTRY_LIMIT(best.t)) {                                                    \
             node = FETCH(stack_node[sp]);                                                            \
             found = true;                                                                            \
         }                                                                                            \
@@ -409,7 +415,7 @@ bool slab_hit(real2 h, real t_min, real t_max)
         bool found = false;                                                                            \
         while (sp > 0 && !found) {                                                                     \
             sp -= 1;                                                                                   \
-            if (stack_t[sp] <= best.t) {                                                               \
+            if (stack_t[sp] <= ENTRY_LIMIT(best.t)) {                                                  \
                 first = stack_node[sp];                                                                \
                 count = stack_count[sp];                                                               \
                 found = true;                                                                          \

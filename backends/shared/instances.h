@@ -38,11 +38,11 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #ifdef __OPENCL_VERSION__
 #define TLAS_LANE_HITS                                                                                  \
     TLAS_INTW hit = TLAS_CONVERT_INTW(tf >= max(tn, TLAS_RWS(t_min))) &                                \
-                    TLAS_CONVERT_INTW(tn <= TLAS_RWS(best.t)) & (node.count >= (TLAS_INTW)(0));
+                    TLAS_CONVERT_INTW(tn <= TLAS_RWS(ENTRY_LIMIT(best.t))) & (node.count >= (TLAS_INTW)(0));
 #define TLAS_LANE_HIT(L) (hit.L != 0)
 #else
 #define TLAS_LANE_HITS
-#define TLAS_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= best.t)
+#define TLAS_LANE_HIT(L) (node.count.L >= 0 && tf.L >= max(tn.L, t_min) && tn.L <= ENTRY_LIMIT(best.t))
 #endif
 #define TLAS_PUSH(L) WIDE_PUSH(L, TLAS_STACK_SIZE, TLAS_LANE_HIT(L))
 #endif

@@ -24,6 +24,7 @@ from backends.reference.backend import ReferenceBackend
 from backends.upload import SceneUploader
 from components import Transform
 from demos import starter
+from demos.kit import CLAY, GOLD, block, use_blocks
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError
 from engine.scene import Scene
@@ -292,6 +293,44 @@ def test_bvh_widths_render_the_same(backend_factory, assets, backend_name, preci
     for label, frame in frames.items():
         for name in AOVS:
             np.testing.assert_array_equal(frame.aov(name), binary.aov(name), err_msg=f"{label} {name}")
+
+
+def arches() -> Scene:
+    """Pillars and beams sharing their front faces, seen head on: where both cover a pixel their hits are at
+    one t or a rounding apart, so the instance shown turns on the tie rule (each pillar is the lower row)."""
+    scene = Scene()
+    use_blocks(scene)
+    for i, (x, z) in enumerate(((-4.0, 0.0), (-1.5, -2.3), (1.0, -0.7), (3.5, -4.1), (-2.7, -6.2), (2.2, -8.9))):
+        block(scene, f"pillar_{i}", (x, 0.0, z), (x + 1.0, 3.0, z + 0.4), CLAY)
+        block(scene, f"beam_{i}", (x - 1.2, 2.0, z), (x + 1.0, 3.0, z + 0.4), GOLD)
+    scene.set_camera((0.3, 2.6, 3.5), look_at=(-0.1, 2.4, -5.0), fov_deg=80.0)
+    return scene
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), FAST_BACKENDS)
+def test_equal_depth_across_instances_goes_to_the_lower_row_in_every_walk(backend_factory, backend_name, precision):
+    """Every walk over instances (the binary, 4-wide and OpenCL's 8-wide instance trees) gives the frame of
+    the plain loop over rows, which meets the lower row first: a box whose entry rounds a hair past a hit at
+    the best t is still entered, so an equal hit of a lower row reached later is not culled."""
+    backend = backend_factory(backend_name, precision)
+    scene = arches()
+    saved, saved_width = dict(backend.extra_defines), backend.tlas_width
+    frames: dict[str, Frame] = {}
+    try:
+        for width in (2, 4, 8) if backend_name == "opencl" else (2, 4):
+            backend.tlas_width = width
+            for use_tlas in (1, 0):
+                backend.extra_defines = {**saved, "USE_TLAS": use_tlas}
+                frames[f"tlas_width {width}, USE_TLAS {use_tlas}"] = render(backend, scene, (64, 48))
+    finally:
+        backend.extra_defines, backend.tlas_width = saved, saved_width
+        scene.close()
+    loop = frames.pop("tlas_width 2, USE_TLAS 0")
+    pillars = [scene.entity(f"pillar_{i}") for i in range(6)]
+    assert np.isin(loop.instance, pillars).sum() > 200
+    for label, frame in frames.items():
+        for name in AOVS:
+            np.testing.assert_array_equal(frame.aov(name), loop.aov(name), err_msg=f"{label} {name}")
 
 
 @pytest.mark.parametrize("precision", ["f32", "f64"])
