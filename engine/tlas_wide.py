@@ -19,13 +19,13 @@ from engine.bvh_wide import collapse_slots, wide_nodes
 from engine.layout import BVH_WIDTHS
 from engine.tlas import AabbTree
 
-#: The top-level tree's widths: binary (the :class:`AabbTree`'s own table), 4- or 8-wide.
+#: The top-level tree's widths: binary (the :class:`engine.tlas.AabbTree`'s own table), 4- or 8-wide.
 TLAS_WIDTHS = (2, 4, 8)
 
 
 @dataclass
 class WideTlas:
-    """The packed table of an :class:`AabbTree` at ``width`` and where each binary node's box lives in it."""
+    """An :class:`engine.tlas.AabbTree` packed at ``width``, and where each binary node's box lies in it."""
 
     width: int
     nodes: np.ndarray
