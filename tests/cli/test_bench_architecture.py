@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import require_backend
 
 from aberrant.bench.architecture import closed_portals, strips_mesh
 from aberrant.bench.scenes import bench_scenes, resolve_scenes
@@ -112,13 +113,13 @@ def test_a_tiny_run_reports_the_hotel_and_the_embree_ratio_of_a_level(tmp_path):
 @pytest.mark.slow
 def test_a_scene_casting_shadows_meets_embree_on_its_frame_without_them(tmp_path):
     pytest.importorskip("embreex")
+    require_backend("opencl")
     out = tmp_path / "report"
     argv = ["bench", "--scenes", "starter", "--backends", "opencl", "--size", "24x24", "--repeat", "2"]
     assert main([*argv, "--sweeps", "none", "--no-overhead", "--out", str(out)]) == 0
     results = json.loads((out / "results.json").read_text())
     (row,) = [r for r in results["rows"] if r["scene"] == "starter"]
-    if row["status"] != "ok":
-        pytest.skip(f"opencl: {row['status']}")
+    assert row["status"] == "ok", row["status"]
     paired = row["embree_paired"]
     assert paired["shadows_off"] is True
     assert row["embree_note"] == "shadows off for the pairing"
