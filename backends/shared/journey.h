@@ -125,18 +125,25 @@ FORCE_INLINE LegEvents first_leg_events(SCENE_DECL Ray ray, real clear)
     return ev;
 }
 
-/* The event of a leg: candidates within the tie window of the nearest are tied: portal, then mesh, then box
- * face; EVENT_NONE for none. */
-FORCE_INLINE int leg_event_kind(LegEvents ev, MeshHit mesh, real o_len)
+/* The t of a leg's nearest portal or box face; REAL_MAX for none. */
+FORCE_INLINE real nearest_space_event(LegEvents ev)
 {
-    int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
-    real nearest = mesh.instance >= 0 ? mesh.t : REAL_MAX;
+    real nearest = REAL_MAX;
 #if HAS_PORTALS
     nearest = min(nearest, ev.portal.t);
 #endif
 #if HAS_ABERRATIONS
     nearest = min(nearest, ev.face.t);
 #endif
+    return nearest;
+}
+
+/* The event of a leg: candidates within the tie window of the nearest are tied: portal, then mesh, then box
+ * face; EVENT_NONE for none. */
+FORCE_INLINE int leg_event_kind(LegEvents ev, MeshHit mesh, real o_len)
+{
+    int kind = mesh.instance >= 0 ? EVENT_MESH : EVENT_NONE;
+    real nearest = min(mesh.instance >= 0 ? mesh.t : REAL_MAX, nearest_space_event(ev));
     if (nearest < REAL_MAX) {
         real limit = nearest + tie_window(o_len, nearest);
 #if HAS_ABERRATIONS
@@ -296,13 +303,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         if (occlusion) {
             t_stop = t_cut;
 #if HAS_SPACE
-            real t_event = REAL_MAX;
-#if HAS_PORTALS
-            t_event = min(t_event, ev.portal.t);
-#endif
-#if HAS_ABERRATIONS
-            t_event = min(t_event, ev.face.t);
-#endif
+            real t_event = nearest_space_event(ev);
             if (t_event < REAL_MAX) {
                 t_stop = min(t_stop, t_event - REAL(2.0f) * tie_window(ray.o_len, t_event));
             }
