@@ -27,6 +27,7 @@ from scenes import render_aovs as render
 from backends import shared
 from backends.base import AOVS
 from backends.opencl import backend as ocl
+from backends.opencl import devices
 from backends.opencl.backend import OpenClBackend
 from engine import layout
 from engine.camera_view import scene_camera
@@ -144,8 +145,8 @@ def test_device_choice_by_option_and_pyopencl_ctx(monkeypatch):
     with OpenClBackend(device="0:0") as backend:  # the option overrides the environment
         assert backend.device == first
     monkeypatch.delenv("PYOPENCL_CTX")
-    chosen = ocl.select_device()
-    kinds = [d.type for p in cl.get_platforms() for d in ocl._devices(p)]
+    chosen = devices.select_device()
+    kinds = [d.type for p in cl.get_platforms() for d in devices._devices(p)]
     if any(k & cl.device_type.GPU for k in kinds):
         assert chosen.type & cl.device_type.GPU
     elif any(k & cl.device_type.CPU for k in kinds):
@@ -172,10 +173,10 @@ def test_default_device_prefers_a_gpu_and_for_f64_one_with_doubles(monkeypatch):
     cpu = Device("cpu", cl.device_type.CPU, "cl_khr_fp64 cl_khr_byte_addressable_store")
     monkeypatch.delenv("PYOPENCL_CTX", raising=False)
     monkeypatch.setattr(cl, "get_platforms", lambda: [Platform(cpu), Platform(gpu)])
-    assert ocl.select_device() is gpu
-    assert ocl.select_device(prefer_fp64=True) is cpu
+    assert devices.select_device() is gpu
+    assert devices.select_device(prefer_fp64=True) is cpu
     monkeypatch.setattr(cl, "get_platforms", lambda: [Platform(gpu)])
-    assert ocl.select_device(prefer_fp64=True) is gpu  # none has doubles: the constructor names the extension
+    assert devices.select_device(prefer_fp64=True) is gpu  # none has doubles: the constructor names the extension
 
 
 def test_caches_go_under_the_project_cache_dir_without_clobbering(monkeypatch, tmp_path):
@@ -192,10 +193,10 @@ def test_caches_go_under_the_project_cache_dir_without_clobbering(monkeypatch, t
 
 def test_pocl_defaults_apply_only_where_the_user_set_nothing(monkeypatch):
     monkeypatch.delenv("POCL_AFFINITY", raising=False)
-    ocl.configure_runtime()
+    devices.configure_runtime()
     assert os.environ["POCL_AFFINITY"] == "1"
     monkeypatch.setenv("POCL_AFFINITY", "0")
-    ocl.configure_runtime()
+    devices.configure_runtime()
     assert os.environ["POCL_AFFINITY"] == "0"
 
 
@@ -203,7 +204,7 @@ def test_pocl_defaults_reach_a_fresh_process_before_pocl_starts():
     """Importing pyopencl through the backend sets them (PoCL reads them once, at its first platform query)."""
     require_backend("opencl")
     env = {k: v for k, v in os.environ.items() if k != "POCL_AFFINITY"}
-    code = "import os; from backends.opencl import backend as b; b.platforms(); print(os.environ.get('POCL_AFFINITY'))"
+    code = "import os; from backends.opencl import devices as b; b.platforms(); print(os.environ.get('POCL_AFFINITY'))"
     result = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "1"
@@ -221,7 +222,7 @@ def test_cli_renders_at_f64_and_fills_the_kernel_cache(tmp_path):
     )
     assert result.returncode == 0, result.stderr
     assert "with the opencl backend" in result.stdout and out.stat().st_size > 0
-    if ocl.pocl_version(ocl.select_device().platform) is not None:
+    if devices.pocl_version(devices.select_device().platform) is not None:
         assert any((tmp_path / "cache" / "opencl" / "pocl").rglob("*")), "PoCL cached nothing"
 
 

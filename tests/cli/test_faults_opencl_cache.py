@@ -38,7 +38,7 @@ UNCHECKED = (
 @pytest.fixture(scope="module", autouse=True)
 def opencl() -> None:
     require_backend("opencl")
-    from backends.opencl.backend import pocl_version, select_device
+    from backends.opencl.devices import pocl_version, select_device
 
     if pocl_version(select_device().platform) is None:
         pytest.skip("the OpenCL device is not PoCL: its kernel cache is the driver's own")
