@@ -19,12 +19,13 @@ import math
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
-from typing import TYPE_CHECKING, Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
+from backends.glsl.tables import CAMERA_BINDING, CAMERA_IMAGE, TABLE_WIDTH, DeviceTables, TableStore
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -40,8 +41,7 @@ INSTALL_HINT = (
     "and moderngl (pip install 'aberrant[glsl]')"
 )
 
-#: Storage-buffer bindings after the scene tables.
-CAMERA_BINDING = len(layout.TABLES)
+#: Storage-buffer bindings of the AOV outputs, after the scene tables' and the camera's.
 OUTPUT_BINDINGS: dict[str, int] = {
     "depth": CAMERA_BINDING + 1,
     "perceived": CAMERA_BINDING + 2,
@@ -55,14 +55,9 @@ _OUTPUT_DTYPES: dict[str, np.dtype] = {
     "instance": np.dtype(np.int32),
     "events": np.dtype(np.uint32),
 }
-#: Image-mode tables: texels per image row (a power of two; llvmpipe allows 16384).
-TABLE_WIDTH = 4096
-#: Image units: 0 the colour output, k + 1 table k, then the camera.
-CAMERA_IMAGE = len(layout.TABLES) + 1
 #: CPU renderers: storage-buffer loads slow enough to keep the tables in images instead.
 _SOFTWARE_RENDERERS = ("llvmpipe", "softpipe")
 
-TableStore = Literal["auto", "ssbo", "image"]
 #: Pixels per run of 8 consecutive invocations (one SIMD vector on llvmpipe): a 4x2 block instead of a row
 #: of 8 diverges less in traversal. Interleaved A/B, 800x800 f32, CPU time per frame: mesh-10k 173 -> 169 ms,
 #: mesh-200k 222 -> 216 ms, ten-boxes 106 -> 104 ms (2x4 and Morton order: smaller gains). Same frames.
@@ -92,43 +87,6 @@ def _create_context() -> moderngl.Context:
 
     # moderngl's stub types each of **settings as a dict; they are plain values (backend="egl").
     return moderngl.create_standalone_context(backend="egl", require=430)  # type: ignore[arg-type]
-
-
-#: Tables held in images under either store (bindings.glsl): with storage buffers, the rest already take the
-#: 16 storage blocks a compute shader may have.
-IMAGE_TABLES: tuple[str, ...] = ("triangle_normals", "texels")
-
-
-def _image_of(store: moderngl.Buffer | moderngl.Texture) -> moderngl.Texture:
-    """A table store known to be an image (``table_store == "image"``)."""
-    import moderngl
-
-    assert isinstance(store, moderngl.Texture)
-    return store
-
-
-def _buffer_of(store: moderngl.Buffer | moderngl.Texture) -> moderngl.Buffer:
-    """A table store known to be a storage buffer (``table_store == "ssbo"``)."""
-    import moderngl
-
-    assert isinstance(store, moderngl.Buffer)
-    return store
-
-
-def _write_texels(image: moderngl.Texture, first: int, texels: np.ndarray) -> None:
-    """Write consecutive texels from index ``first`` (row-major, TABLE_WIDTH per row): at most three writes."""
-    width = image.size[0]
-    pos, end = first, first + len(texels)
-    while pos < end:
-        x, y = pos % width, pos // width
-        if x == 0 and end - pos >= width:
-            count = (end - pos) // width * width
-            viewport = (0, y, width, count // width)
-        else:
-            count = min(width - x, end - pos)
-            viewport = (x, y, count, 1)
-        image.write(texels[pos - first : pos - first + count], viewport=viewport, alignment=1)
-        pos += count
 
 
 #: BVH widths the shader traverses: 8-wide nodes are read as float8, which GLSL does not have.
@@ -185,15 +143,11 @@ class GlslBackend(shared.UploadedScene, Backend):
             tables = "image" if self.software else "ssbo"
         #: Where the tables live on the device: ``"ssbo"`` or ``"image"``.
         self.table_store: str = tables
-        self._tables: dict[str, moderngl.Buffer | moderngl.Texture] = {}
-        self._table_bytes: dict[str, int] = {}
-        self._forget_upload()
         with self._current():
-            camera_bytes = layout.camera_dtype(self.precision).itemsize
-            if self.table_store == "image":
-                self._camera: moderngl.Buffer | moderngl.Texture = self._image(camera_bytes // 16)
-            else:
-                self._camera = self._ctx.buffer(reserve=camera_bytes)
+            self._device = DeviceTables(self._ctx, tables, layout.camera_dtype(self.precision).itemsize)
+        #: Each uploaded table's buffer or image (the device tables' own dict).
+        self._tables = self._device.stores
+        self._forget_upload()
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -295,75 +249,24 @@ class GlslBackend(shared.UploadedScene, Backend):
                 whole = (
                     update.rows is None
                     or update.table not in self._tables
-                    or self._table_bytes[update.table] != table.nbytes
+                    or self._device.nbytes[update.table] != table.nbytes
                 )
                 if whole:
-                    self._write_whole(update.table, table)
+                    self._device.write_whole(update.table, table)
                     written += table.nbytes
                     rewritten.add(update.table)
                 else:
                     assert update.rows is not None
-                    written += self._write_rows(update.table, table, update.rows)
+                    written += self._device.write_rows(update.table, table, update.rows)
         self._note_upload(packed, rewritten)
         return written
 
-    def _image(self, texels: int) -> moderngl.Texture:
-        """An RGBA32UI image of TABLE_WIDTH-texel rows holding at least ``texels`` texels."""
-        import moderngl
-
-        rows = max(1, -(-texels // TABLE_WIDTH))
-        texture = self._context().texture((TABLE_WIDTH, rows), 4, dtype="u4")
-        texture.filter = (moderngl.NEAREST, moderngl.NEAREST)  # integer textures are complete only so
-        return texture
-
-    def _write_whole(self, name: str, table: np.ndarray) -> None:
-        """Write a whole table, in place when its size is unchanged, else into a new buffer or image."""
-        old = self._tables.get(name)
-        same = old is not None and self._table_bytes.get(name) == table.nbytes
-        if self._in_image(name):
-            texels = table.nbytes // 16
-            if not same:
-                if old is not None:
-                    old.release()
-                old = self._tables[name] = self._image(texels)
-            assert old is not None
-            image = _image_of(old)
-            width, rows = image.size
-            data = np.zeros((rows * width, 4), np.uint32)
-            data[:texels] = table.view(np.uint32).reshape(-1, 4)
-            image.write(data)
-        elif same:
-            assert old is not None
-            old.write(table)
-        else:
-            if old is not None:
-                old.release()
-            self._tables[name] = self._context().buffer(table)
-        self._table_bytes[name] = table.nbytes
-
-    def _write_rows(self, name: str, table: np.ndarray, rows: range) -> int:
-        """Write rows ``[start, stop)`` only; returns the bytes written."""
-        part = table[rows.start : rows.stop]
-        target = self._tables[name]
-        if not self._in_image(name):
-            _buffer_of(target).write(part, offset=rows.start * table.dtype.itemsize)
-            return part.nbytes
-        stride = table.dtype.itemsize // 16
-        _write_texels(_image_of(target), rows.start * stride, part.view(np.uint32).reshape(-1, 4))
-        return part.nbytes
-
-    def _in_image(self, name: str) -> bool:
-        """Whether a table lives in an image (every table with the image store; :data:`IMAGE_TABLES` always)."""
-        return self.table_store == "image" or name in IMAGE_TABLES
-
     def read_table(self, name: str) -> bytes:
         """The bytes of an uploaded table as the device holds them (tests, debugging)."""
-        store = self._tables.get(name)
-        if store is None:
+        if name not in self._tables:
             raise AberrantError(f"glsl backend: table {name!r} has not been uploaded")
         with self._current():
-            data = _image_of(store).read(alignment=1) if self._in_image(name) else store.read()
-        return data[: self._table_bytes[name]]
+            return self._device.read(name)
 
     # --- shaders ---------------------------------------------------------------------
 
@@ -456,21 +359,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             defines = self._defines(aovs, features)
             defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
             program = self._program(defines)
-            if self.table_store == "image":
-                camera_image = _image_of(self._camera)
-                _write_texels(camera_image, 0, row.view(np.uint32).reshape(-1, 4))
-                for unit, name in enumerate(layout.TABLES, start=1):
-                    _image_of(self._tables[name]).bind_to_image(unit, read=True, write=False)
-                camera_image.bind_to_image(CAMERA_IMAGE, read=True, write=False)
-            else:
-                camera_buffer = _buffer_of(self._camera)
-                camera_buffer.write(row)
-                for binding, name in enumerate(layout.TABLES):
-                    if name in IMAGE_TABLES:
-                        _image_of(self._tables[name]).bind_to_image(binding + 1, read=True, write=False)
-                    else:
-                        _buffer_of(self._tables[name]).bind_to_storage_buffer(binding)
-                camera_buffer.bind_to_storage_buffer(CAMERA_BINDING)
+            self._device.bind(row)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:
                     self._outputs[name].bind_to_storage_buffer(OUTPUT_BINDINGS[name])
@@ -503,13 +392,13 @@ class GlslBackend(shared.UploadedScene, Backend):
         if self._ctx is None:
             return
         with self._current():
-            for resource in [*self._tables.values(), *self._outputs.values(), *self._programs.values()]:
-                resource.release()
-            self._camera.release()
+            self._device.release()
+            for buffer in self._outputs.values():
+                buffer.release()
+            for program in self._programs.values():
+                program.release()
             if self._texture is not None:
                 self._texture.release()
-        self._tables.clear()
-        self._table_bytes.clear()
         self._outputs.clear()
         self._programs.clear()
         self._texture = None

@@ -14,7 +14,8 @@ from scenes import render_aovs as render
 
 from backends import shared
 from backends.base import AOVS
-from backends.glsl.backend import CAMERA_IMAGE, GlslBackend, _write_texels, lane_block
+from backends.glsl.backend import GlslBackend, lane_block
+from backends.glsl.tables import CAMERA_IMAGE, new_image, write_texels
 from backends.shared import bvh_depth, stack_size
 from engine import layout
 from engine.camera_view import scene_camera
@@ -120,8 +121,8 @@ def test_layout_h_records_read_the_packed_bytes(backend_factory, precision, tabl
         out = ctx.buffer(reserve=len(rows) * words * 4)
         out.bind_to_storage_buffer(15)
         if store == "image":
-            src = backend._image(len(rows) * dtype.itemsize // 16)
-            _write_texels(src, 0, rows.view(np.uint32).reshape(-1, 4))
+            src = new_image(ctx, len(rows) * dtype.itemsize // 16)
+            write_texels(src, 0, rows.view(np.uint32).reshape(-1, 4))
             name = "bvh_nodes" if table in special else table
             unit = CAMERA_IMAGE if table == "camera" else layout.TABLES.index(name) + 1
             src.bind_to_image(unit, read=True, write=False)
@@ -220,12 +221,12 @@ def test_a_variant_is_compiled_once_and_reused(fresh_glsl):
 @pytest.mark.parametrize(("first", "count"), [(0, 5), (4090, 20), (4096, 4096), (100, 9000), (8191, 1)])
 def test_texel_writes_split_across_image_rows(glsl, first, count):
     with glsl.context:
-        image = glsl._image(first + count + 7)
+        image = new_image(glsl.context, first + count + 7)
         rows = image.size[1]
         before = np.arange(rows * image.size[0] * 4, dtype=np.uint32).reshape(-1, 4)
         image.write(before)
         texels = np.random.default_rng(first).integers(0, 2**32, (count, 4), dtype=np.uint32)
-        _write_texels(image, first, texels)
+        write_texels(image, first, texels)
         after = np.frombuffer(image.read(alignment=1), np.uint32).reshape(-1, 4)
         image.release()
     expected = before.copy()
