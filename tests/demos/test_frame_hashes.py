@@ -2,13 +2,15 @@
 
 The hashes were recorded at 48x36 over all five AOVs. The reference (float64 NumPy) is compared
 everywhere; a fast backend's bits depend on its driver, so it is compared only on the device the
-hashes were recorded on and skipped, with the device named, elsewhere.
+hashes were recorded on and skipped, with the device named, elsewhere. A PoCL CPU device counts by the code
+PoCL generates for it (its LLVM target and PoCL's version), not by the processor's brand in its name.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +34,14 @@ def frame_hash(frame: Frame) -> str:
     return digest.hexdigest()
 
 
+#: A PoCL CPU device's name: ``pthread-<LLVM target>-<processor brand>``; the target is lower case, the brand not.
+_POCL_CPU_NAME = re.compile(r"^(?P<target>(?:pthread|basic|cpu)-[a-z0-9_.-]+?)-(?=[A-Z])")
+
+
 def device_of(backend: Backend) -> str:
-    info = backend.info()
+    info = dict(backend.info())
+    if "pocl" in info and (match := _POCL_CPU_NAME.match(info.get("device", ""))):
+        info["device"] = match["target"]
     return " / ".join(info[key] for key in ("renderer", "version", "device", "pocl") if key in info)
 
 
