@@ -350,11 +350,14 @@ class OpenClBackend(shared.UploadedScene, Backend):
         width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
         queue = self._queue
         start = time.perf_counter()
-        kernel = self._kernel(self._defines(self._frame_features(camera, width, height)))
-        self._ensure_outputs(width, height, aovs)
         self._camera_row = pack_camera(
             camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
         )
+        features = self._frame_features(camera, width, height)
+        defines = self._defines(features)
+        defines.update(self._frame_space_defines(features, self._camera_row, self.precision), **self.extra_defines)
+        kernel = self._kernel(defines)
+        self._ensure_outputs(width, height, aovs)
         self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         args: list[cl.Buffer | None] = [self._tables[name] for name in layout.TABLES]
         args.append(self._camera)

@@ -289,8 +289,9 @@ class UploadedScene:
         self._uploaded = True
 
     def _frame_space_defines(self, features: Features, row: np.ndarray, precision: str) -> dict[str, int]:
-        """Box code a frame provably never runs, compiled out (CAMERA_BOX_ENTRY, FACE_NEXT_ONLY in core.h): where
-        llvmpipe runs every branch masked for all its lanes. ``row``: the frame's camera row (pack_camera).
+        """Box code a frame provably never runs, compiled out (CAMERA_BOX_ENTRY, FACE_NEXT_ONLY in core.h): llvmpipe
+        runs every branch masked for all its lanes, and PoCL folds the first leg's box state (none) into constants
+        where the camera's transition is gone. ``row``: the frame's camera row (pack_camera).
 
         The gap test after a face (box_after_face) compares a box's gap with 2 nudges of |o| + t: a leg starts
         at the camera or on a portal, box or instance (within reach R of the packed origin) and its face lies

@@ -76,7 +76,8 @@
  *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
  *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
  *                      gap test true for every face event of the frame, so the containing_box loop after a face
- *                      compiles out (GLSL per frame, where llvmpipe would run that code masked for every ray)
+ *                      compiles out (both backends, per frame: llvmpipe would run that code masked for every
+ *                      ray, and PoCL, knowing the first leg starts in no box, folds its state into constants)
  *   SPACE_WALK         1: the legs those clearances prove free of meshes are crossed in a loop of their
  *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
  *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
