@@ -59,6 +59,8 @@ _OUTPUT_DTYPES: dict[str, np.dtype] = {
 TABLE_WIDTH = 4096
 #: Image units: 0 the colour output, k + 1 table k, then the camera.
 CAMERA_IMAGE = len(layout.TABLES) + 1
+#: ... and the frame's view tiles (engine/view_tiles.py; the image store only).
+VIEW_TILES_IMAGE = CAMERA_IMAGE + 1
 #: CPU renderers: storage-buffer loads slow enough to keep the tables in images instead.
 _SOFTWARE_RENDERERS = ("llvmpipe", "softpipe")
 
@@ -194,6 +196,8 @@ class GlslBackend(shared.UploadedScene, Backend):
                 self._camera: moderngl.Buffer | moderngl.Texture = self._image(camera_bytes // 16)
             else:
                 self._camera = self._ctx.buffer(reserve=camera_bytes)
+        self.view_tiles = self.table_store == "image"
+        self._view_tiles: moderngl.Texture | None = None
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -396,6 +400,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             TABLE_WIDTH=TABLE_WIDTH,
             TABLE_WIDTH_LOG2=TABLE_WIDTH.bit_length() - 1,
             CAMERA_IMAGE=CAMERA_IMAGE,
+            VIEW_TILES_IMAGE=VIEW_TILES_IMAGE,
         )
         for name in layout.TABLES:
             defines[f"{name.upper()}_STRIDE"] = layout.table_dtype(name, self.precision).itemsize // 16
@@ -454,8 +459,12 @@ class GlslBackend(shared.UploadedScene, Backend):
             )
             features = self._frame_features(camera, width, height)
             defines = self._defines(aovs, features)
-            defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
+            tiles = self._frame_view_tiles(camera, width, height, features, row)
+            defines.update(self._frame_space_defines(features, row, self.precision), **shared.view_tile_defines(tiles))
+            defines.update(self.extra_defines)
             program = self._program(defines)
+            if tiles is not None:
+                self._bind_view_tiles(tiles)
             if self.table_store == "image":
                 camera_image = _image_of(self._camera)
                 _write_texels(camera_image, 0, row.view(np.uint32).reshape(-1, 4))
@@ -496,6 +505,15 @@ class GlslBackend(shared.UploadedScene, Backend):
         frame.timings_ms["render"] = (end - start) * 1e3
         return frame
 
+    def _bind_view_tiles(self, tiles: np.ndarray) -> None:
+        """Write the frame's view tiles into their image (grown when too small) and bind it."""
+        if self._view_tiles is None or self._view_tiles.size[0] * self._view_tiles.size[1] < len(tiles):
+            if self._view_tiles is not None:
+                self._view_tiles.release()
+            self._view_tiles = self._image(2 * len(tiles))
+        _write_texels(self._view_tiles, 0, tiles.view(np.uint32).reshape(-1, 4))
+        self._view_tiles.bind_to_image(VIEW_TILES_IMAGE, read=True, write=False)
+
     # --- teardown ----------------------------------------------------------------------
 
     def release(self) -> None:
@@ -506,6 +524,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             for resource in [*self._tables.values(), *self._outputs.values(), *self._programs.values()]:
                 resource.release()
             self._camera.release()
+            if self._view_tiles is not None:
+                self._view_tiles.release()
             if self._texture is not None:
                 self._texture.release()
         self._tables.clear()
