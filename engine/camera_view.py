@@ -132,25 +132,46 @@ def view_planes(view: CameraView, aspect: float) -> np.ndarray:
     return np.where((normals @ forward)[:, None] < 0.0, -normals, normals)
 
 
-def _box_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
-    """Whether the box lo/hi is not wholly outside one of the pyramid's planes (apex: the camera)."""
-    # The box's corner furthest along each normal, relative to the apex.
-    far = np.where(planes > 0.0, hi, lo) - apex
-    reach = float(np.max(np.abs(np.concatenate([lo - apex, hi - apex]))))
-    return bool(np.all(np.einsum("pk,pk->p", planes, far) >= -VIEW_MARGIN * max(1.0, reach)))
+def _boxes_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Which boxes lo/hi (n, 3) are not wholly outside one of the pyramid's planes (apex: the camera)."""
+    # Each box's corner furthest along each normal, relative to the apex: (n, planes, 3).
+    lo, hi = lo - apex, hi - apex
+    far = np.where(planes[None] > 0.0, hi[:, None], lo[:, None])
+    reach = np.maximum(np.abs(lo), np.abs(hi)).max(axis=1)
+    return np.einsum("npk,pk->np", far, planes).min(axis=1) >= -VIEW_MARGIN * np.maximum(1.0, reach)
+
+
+def seen_leaves(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.ndarray, root: int) -> np.ndarray:
+    """The leaves (rows of ``nodes``) of the tree from ``root`` whose boxes meet the pyramid of the corner rays
+    (camera-relative bounds, ``origin`` the packed origin): a walk level by level through the nodes seen, so
+    its cost follows what the camera sees. A primary ray can meet only these leaves' portals or boxes."""
+    apex = np.asarray(view.position, dtype=np.float64) - origin
+    planes = view_planes(view, aspect)
+    frontier = np.array([root], np.int64)
+    leaves = []
+    for _ in range(len(nodes)):
+        if not frontier.size:
+            break
+        lo, hi = nodes["bounds_min"][frontier].astype(np.float64), nodes["bounds_max"][frontier].astype(np.float64)
+        frontier = frontier[_boxes_seen(planes, apex, lo, hi)]
+        leaf = nodes["count"][frontier] > 0
+        leaves.append(frontier[leaf])
+        first = nodes["first"][frontier[~leaf]].astype(np.int64)
+        frontier = np.concatenate([first, first + 1])
+    return np.concatenate(leaves) if leaves else np.zeros(0, np.int64)
 
 
 def view_reaches(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.ndarray, root: int) -> bool:
-    """Whether a primary ray can meet a leaf of the tree in ``nodes`` from ``root`` (camera-relative bounds,
-    ``origin`` the packed origin): a leaf's box meets the pyramid of the corner rays. False proves that
-    every primary ray misses every portal quad or box the tree holds."""
+    """Whether a primary ray can meet a leaf of the tree in ``nodes`` from ``root`` (as :func:`seen_leaves`,
+    depth first, ending at the first leaf seen). False proves that every primary ray misses every portal
+    quad or box the tree holds."""
     apex = np.asarray(view.position, dtype=np.float64) - origin
     planes = view_planes(view, aspect)
     stack = [root]
     while stack:
         node = stack.pop()
-        lo, hi = nodes["bounds_min"][node].astype(np.float64), nodes["bounds_max"][node].astype(np.float64)
-        if not _box_seen(planes, apex, lo, hi):
+        lo, hi = nodes["bounds_min"][node : node + 1].astype(np.float64), nodes["bounds_max"][node : node + 1]
+        if not _boxes_seen(planes, apex, lo, hi.astype(np.float64))[0]:
             continue
         if nodes["count"][node] > 0:
             return True

@@ -325,6 +325,15 @@ CAMERA = Record(
 )
 
 
+#: The per-frame view tiles (:mod:`engine.view_tiles`): the portal rows the first leg of a primary ray through
+#: each screen tile may meet, as CSR. Rows ``[0, tiles)``, one per tile in row-major order (tile row 0 at the
+#: image's top): ``entry = (first entry, count, 0, 0)``; each row after them holds a portal row in ``entry.x``
+#: and its leaf's distance from the camera (float32 bits, a lower bound of any hit's t) in ``entry.y``, each
+#: tile's nearest first.
+VIEW_TILE = Record("ViewTile", (Field("entry", "int4"),))
+VIEW_TILE_DTYPE = VIEW_TILE.dtype()
+
+
 #: A light (``components.Light``): ``vector.xyz`` is a sun's unit direction towards it, or a point light's
 #: camera-relative position; ``color = (rgb x intensity, range)``, range 0 for none; ``meta = (kind, shadows,
 #: entity, 0)``, kind :data:`LIGHT_KINDS`. At most ``components.MAX_LIGHTS`` rows are live.
@@ -376,6 +385,7 @@ RECORDS: tuple[Record, ...] = (
     SPACE_NODE,
     LIGHT,
     CAMERA,
+    VIEW_TILE,
 )
 
 # Mode and exit codes shared by the packer and every kernel.

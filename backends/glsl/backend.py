@@ -25,7 +25,14 @@ import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
-from backends.glsl.tables import CAMERA_BINDING, CAMERA_IMAGE, TABLE_WIDTH, DeviceTables, TableStore
+from backends.glsl.tables import (
+    CAMERA_BINDING,
+    CAMERA_IMAGE,
+    TABLE_WIDTH,
+    VIEW_TILES_IMAGE,
+    DeviceTables,
+    TableStore,
+)
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -148,6 +155,8 @@ class GlslBackend(shared.UploadedScene, Backend):
         #: Each uploaded table's buffer or image (the device tables' own dict).
         self._tables = self._device.stores
         self._forget_upload()
+        #: Whether frames may take view tiles: their image unit exists with the image store only.
+        self.view_tiles = self.table_store == "image"
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -299,6 +308,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             TABLE_WIDTH=TABLE_WIDTH,
             TABLE_WIDTH_LOG2=TABLE_WIDTH.bit_length() - 1,
             CAMERA_IMAGE=CAMERA_IMAGE,
+            VIEW_TILES_IMAGE=VIEW_TILES_IMAGE,
         )
         for name in layout.TABLES:
             defines[f"{name.upper()}_STRIDE"] = layout.table_dtype(name, self.precision).itemsize // 16
@@ -357,8 +367,12 @@ class GlslBackend(shared.UploadedScene, Backend):
             )
             features = self._frame_features(camera, width, height)
             defines = self._defines(aovs, features)
-            defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
+            tiles = self._frame_view_tiles(camera, width, height, features, row)
+            defines.update(self._frame_space_defines(features, row, self.precision), **shared.view_tile_defines(tiles))
+            defines.update(self.extra_defines)
             program = self._program(defines)
+            if tiles is not None:
+                self._device.bind_view_tiles(tiles)
             self._device.bind(row)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:

@@ -122,6 +122,17 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 
 #endif
 
+/* The per-frame view tiles (engine/view_tiles.py), in an image under either store: with storage buffers the
+ * 16 storage blocks are taken (see below); the backend asks for them only with images. */
+#if VIEW_TILES
+layout(rgba32ui, binding = VIEW_TILES_IMAGE) readonly restrict uniform uimage2D view_tiles_img;
+#if TABLES_IN_IMAGES
+#define VIEW_TILE(i) (ViewTile_from_texels(view_tiles_img, (i)))
+#else
+#error "VIEW_TILES reads the tiles through layout.h's image readers (TABLES_IN_IMAGES)"
+#endif
+#endif
+
 /* One box: its record is read once per invocation (main.comp, HELD_BOX_), not at every face search and
  * transition (ten-boxes-aberration: -4.5 % of a frame's CPU time; one portal pair held likewise gains nothing). */
 #if BOX_COUNT == 1

@@ -22,6 +22,8 @@ CAMERA_BINDING = len(layout.TABLES)
 TABLE_WIDTH = 4096
 #: Image units: 0 the colour output, k + 1 table k, then the camera.
 CAMERA_IMAGE = len(layout.TABLES) + 1
+#: ... and the frame's view tiles (engine/view_tiles.py; the image store only).
+VIEW_TILES_IMAGE = CAMERA_IMAGE + 1
 #: Tables held in images under either store (bindings.glsl): with storage buffers, the rest already take the
 #: 16 storage blocks a compute shader may have.
 IMAGE_TABLES: tuple[str, ...] = ("triangle_normals", "texels")
@@ -83,6 +85,7 @@ class DeviceTables:
         self._camera: moderngl.Buffer | moderngl.Texture = (
             new_image(ctx, camera_bytes // 16) if store == "image" else ctx.buffer(reserve=camera_bytes)
         )
+        self._view_tiles: moderngl.Texture | None = None
 
     def in_image(self, name: str) -> bool:
         """Whether a table lives in an image (every table with the image store; :data:`IMAGE_TABLES` always)."""
@@ -148,9 +151,21 @@ class DeviceTables:
                     buffer_of(self.stores[name]).bind_to_storage_buffer(binding)
             camera_buffer.bind_to_storage_buffer(CAMERA_BINDING)
 
+    def bind_view_tiles(self, tiles: np.ndarray) -> None:
+        """Write the frame's view tiles into their image (grown when too small) and bind it (image store only)."""
+        if self._view_tiles is None or self._view_tiles.size[0] * self._view_tiles.size[1] < len(tiles):
+            if self._view_tiles is not None:
+                self._view_tiles.release()
+            self._view_tiles = new_image(self._ctx, 2 * len(tiles))
+        write_texels(self._view_tiles, 0, tiles.view(np.uint32).reshape(-1, 4))
+        self._view_tiles.bind_to_image(VIEW_TILES_IMAGE, read=True, write=False)
+
     def release(self) -> None:
         """Free every buffer and image."""
         for resource in [*self.stores.values(), self._camera]:
             resource.release()
+        if self._view_tiles is not None:
+            self._view_tiles.release()
+            self._view_tiles = None
         self.stores.clear()
         self.nbytes.clear()

@@ -57,7 +57,7 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.opencl", "trace.cl"),
 )
 #: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.
-KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", *(f"{name}_out" for name in AOVS))
+KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", *(f"{name}_out" for name in AOVS))
 #: Build options of every variant. ``-cl-denorms-are-zero`` lets the driver flush float denormals
 #: (GPUs mostly do anyway, so the core never relies on them): on PoCL 3.0 a torus of 10,000
 #: triangles at f32 took 30 % less time per frame with it, with bit-identical parity results.
@@ -149,6 +149,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         mf = self._cl.mem_flags
         self._camera = self._cl.Buffer(self._ctx, mf.READ_ONLY, layout.camera_dtype(self.precision).itemsize)
         self._camera_row: np.ndarray | None = None  # kept alive while its non-blocking copy runs
+        self._view_tiles = self._cl.Buffer(self._ctx, mf.READ_ONLY, layout.VIEW_TILE_DTYPE.itemsize)
+        self._view_tile_rows: np.ndarray | None = None  # likewise
         self._outputs: dict[str, cl.Buffer] = {}
         self._size: tuple[int, int] = (0, 0)
         self._kernels: dict[tuple[tuple[str, int], ...], cl.Kernel] = {}
@@ -354,13 +356,24 @@ class OpenClBackend(shared.UploadedScene, Backend):
             camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
         )
         features = self._frame_features(camera, width, height)
+        tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
         defines = self._defines(features)
-        defines.update(self._frame_space_defines(features, self._camera_row, self.precision), **self.extra_defines)
+        defines.update(
+            self._frame_space_defines(features, self._camera_row, self.precision),
+            **shared.view_tile_defines(tiles),
+            **self.extra_defines,
+        )
         kernel = self._kernel(defines)
         self._ensure_outputs(width, height, aovs)
         self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
+        if tiles is not None:
+            if self._view_tiles.size < tiles.nbytes:
+                self._view_tiles.release()
+                self._view_tiles = self._cl.Buffer(self._context(), self._cl.mem_flags.READ_ONLY, 2 * tiles.nbytes)
+            self._view_tile_rows = tiles
+            self._cl.enqueue_copy(queue, self._view_tiles, tiles, is_blocking=False)
         args: list[cl.Buffer | None] = [self._tables[name] for name in layout.TABLES]
-        args.append(self._camera)
+        args += [self._camera, self._view_tiles]
         args += [self._outputs[name] if name in aovs else None for name in AOVS]
         self._bind(kernel, args)
         if self.local_size is None:
@@ -393,7 +406,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         if self._ctx is None:
             return
         self._queue.finish()
-        for buffer in [*self._tables.values(), *self._outputs.values(), self._camera]:
+        for buffer in [*self._tables.values(), *self._outputs.values(), self._camera, self._view_tiles]:
             buffer.release()
         self._tables.clear()
         self._outputs.clear()
@@ -402,5 +415,6 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._program_keys.clear()
         self._bound.clear()
         self._camera_row = None
+        self._view_tile_rows = None
         self._ctx = None
         self._uploaded = False

@@ -2,7 +2,7 @@
  * tracer files, core.h to pixel.h).
  *
  * One work-item per pixel, row 0 = the image's top row. The scene tables come
- * in the order of engine.layout.TABLES, then the camera row, then one buffer
+ * in the order of engine.layout.TABLES, then the camera row and the view tiles, then one buffer
  * per AOV. An AOV the caller did not ask for is passed as a NULL buffer and
  * skipped by a uniform branch, so a single program serves every AOV set (a
  * PoCL build costs seconds; a never-taken branch costs nothing).
@@ -23,6 +23,7 @@ __kernel void trace(__global const Settings* settings,
                     __global const TriangleNormal* triangle_normals,
                     __global const Texel* texels,
                     __global const Camera* camera,
+                    __global const ViewTile* view_tiles,
                     __global uchar4* color_out,
                     __global float* depth_out,
                     __global float* perceived_out,
@@ -50,6 +51,7 @@ __kernel void trace(__global const Settings* settings,
     sc.lights = lights;
     sc.triangle_normals = triangle_normals;
     sc.texels = texels;
+    sc.view_tiles = view_tiles;
     Pixel px = trace_pixel(sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {

@@ -29,6 +29,7 @@ from engine.box_clearance import instance_bounds
 from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
 from engine.tlas import rows_at
+from engine.view_tiles import TILE_LOG2, view_tiles
 
 from .layout_h import layout_h
 
@@ -238,6 +239,11 @@ class UploadedScene:
     #: Whether the kernels walk the space trees' 4-wide forms (SPACE_WIDE), not the binary ones: each
     #: backend's own, from scripts/space_tree_ab.py A/Bs.
     space_wide: ClassVar[bool] = False
+    #: Whether camera rays take their first leg's portals from the frame's view tiles (VIEW_TILES) where that
+    #: frame allows (interleaved A/B in README.md's table; boxes keep their tree: no gain there).
+    view_tiles: bool = True
+    #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` also skips building the tiles).
+    extra_defines: dict[str, int]
 
     def _forget_upload(self) -> None:
         self._counts: dict[str, int] = {}
@@ -324,3 +330,22 @@ class UploadedScene:
             if view_reaches(camera, aspect, self._origin, nodes, root) or rows_at(nodes, root, position, near):
                 return features
         return replace(features, portals=False, aberration_modes=frozenset())
+
+    def _frame_view_tiles(
+        self, camera: CameraView, width: int, height: int, features: Features, row: np.ndarray
+    ) -> np.ndarray | None:
+        """The frame's view tiles (engine/view_tiles.py) where its camera rays' first legs can use them: portals
+        found through their tree, and a first leg that starts at the camera in no box (``size.z`` -1, so its
+        direction is the primary ray's); else None, and the tree serves every leg."""
+        if not self.view_tiles or not self.extra_defines.get("VIEW_TILES", 1):
+            return None
+        if not (features.portals and self._space["PORTAL_TREE"] and self._portal_root is not None):
+            return None
+        if features.aberration_modes and int(row["size"][0, 2]) != -1:
+            return None
+        return view_tiles(camera, width, height, self._origin, self._space_nodes, self._portal_root)
+
+
+def view_tile_defines(tiles: np.ndarray | None) -> dict[str, int]:
+    """The defines of a frame with view tiles (none without: those frames compile as before)."""
+    return {} if tiles is None else {"VIEW_TILES": 1, "VIEW_TILE_LOG2": TILE_LOG2}

@@ -25,6 +25,7 @@ typedef struct SceneTables {
     __global const Light* lights;
     __global const TriangleNormal* triangle_normals;
     __global const Texel* texels;
+    __global const ViewTile* view_tiles; /* per frame, beside the camera row */
 } SceneTables;
 
 #define SCENE_DECL SceneTables sc,
@@ -45,3 +46,4 @@ typedef struct SceneTables {
 #define LIGHT(i) (sc.lights[(i)])
 #define TRIANGLE_NORMAL(i) (sc.triangle_normals[(i)])
 #define TEXEL(i) (sc.texels[(i)])
+#define VIEW_TILE(i) (sc.view_tiles[(i)])

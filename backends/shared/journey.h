@@ -3,6 +3,16 @@
 
 /* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
+#if VIEW_TILES
+/* Whether a leg is a camera ray's first and the view tile it lies in (engine/view_tiles.py): its portals come
+ * from the tile's list, not the tree; constant false for the other legs and shadow rays. */
+#define TILED_DECL , bool tiled, int tile
+#define TILED_ARG(tiled, tile) , tiled, tile
+#else
+#define TILED_DECL
+#define TILED_ARG(tiled, tile)
+#endif
+
 /* A ray's state at its start (docs/semantics.md section 1): from o along unit d, no box yet, nothing left. */
 FORCE_INLINE Ray start_ray(real3 o, real3 d)
 {
@@ -87,15 +97,25 @@ STRUCT_END(LegEvents)
 
 /* 1. The nearest linked portal quad and box face past the point the ray leaves (t_from along the leg) by
  * t_min, skipping the surface it leaves; the mesh search's limit and whether the host's clearances prove
- * it empty. */
-FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray)
+ * it empty. Tiled: the portals from the view tile's list, which holds every row the tree would find, tested
+ * alike. */
+FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray TILED_DECL)
 {
     LegEvents ev;
     ev.t_min = ray.t_from + T_MIN_RELATIVE * max(REAL(1.0f), ray.o_len + ray.t_from);
     ev.t_cut = REAL_MAX;
     ev.search = true;
 #if HAS_PORTALS
-    ev.portal = nearest_portal(SCENE_PASS ray.o, ray.r, ev.t_min, ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1);
+    int skip_portal = ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1;
+#if VIEW_TILES && PORTAL_TREE
+    if (tiled) {
+        ViewTile list = VIEW_TILE(tile);
+        ev.portal = tile_portal(SCENE_PASS ray.o, ray.r, ev.t_min, skip_portal, list.entry.x, list.entry.y);
+    } else
+#endif
+    {
+        ev.portal = nearest_portal(SCENE_PASS ray.o, ray.r, ev.t_min, skip_portal);
+    }
     ev.t_cut = ev.portal.t;
 #endif
 #if HAS_ABERRATIONS
@@ -114,9 +134,9 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray)
 /* leg_events for the first leg (no event yet), which starts where clear says (the camera's clearance to
  * every instance, lens.z from the host; 0 for none): a search that ends (with the tie window for rounding)
  * nearer than that finds nothing. Only here, so the crossings' code does not carry the test. */
-FORCE_INLINE LegEvents first_leg_events(SCENE_DECL Ray ray, real clear)
+FORCE_INLINE LegEvents first_leg_events(SCENE_DECL Ray ray, real clear TILED_DECL)
 {
-    LegEvents ev = leg_events(SCENE_PASS ray);
+    LegEvents ev = leg_events(SCENE_PASS ray TILED_ARG(tiled, tile));
 #if SKIP_CLEAR_SEARCH && CAMERA_CLEAR_SEARCH
     if ((ev.t_cut + REAL(2.0f) * tie_window(ray.o_len, ev.t_cut)) * ray.r_len < clear) {
         ev.search = false;
@@ -215,7 +235,7 @@ STRUCT_END(Journey)
 /* A ray's journey from its start, event after event (docs/semantics.md sections 3-13): the camera's rays
  * and the shadow rays take this one. clear: the start's clearance to every instance (the camera's, lens.z;
  * 0 for none); reach: the world path length at which the ray counts as arrived (REAL_MAX for none). */
-FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real reach OCCLUSION_DECL)
+FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real reach OCCLUSION_DECL TILED_DECL)
 {
     Journey trip;
     trip.end = END_MISS;
@@ -232,7 +252,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
 #if HAS_SPACE
     /* Each leg's events, found once: here for the first leg, after each crossing for the next. */
-    LegEvents ev = first_leg_events(SCENE_PASS ray, clear);
+    LegEvents ev = first_leg_events(SCENE_PASS ray, clear TILED_ARG(tiled, tile));
 #endif
     /* Each pass of the event loop searches one leg for a mesh and either ends the ray or counts an event, so
      * MAX_EVENTS + 1 passes always suffice. A leg that ends on a portal or box face leaves that event to cross
@@ -263,7 +283,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         if (walk) {
             do {
                 ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
-                ev = leg_events(SCENE_PASS ray);
+                ev = leg_events(SCENE_PASS ray TILED_ARG(false, 0));
                 kind = leg_event_kind(ev, none, ray.o_len);
                 walk = !ev.search && ray.n < max_events && kind != EVENT_NONE;
             } while (walk);
@@ -271,7 +291,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
 #else
         if (pending) {
             ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
-            ev = leg_events(SCENE_PASS ray);
+            ev = leg_events(SCENE_PASS ray TILED_ARG(false, 0));
         }
 #endif
 #endif
@@ -369,7 +389,7 @@ FORCE_INLINE bool shadow_lit(SCENE_DECL Camera cam, real3 position, real3 n, rea
     ray = enter_box(SCENE_PASS ray, REAL(0.0f), box_after(SCENE_PASS ray.o, ray.r, ray.o_len, REAL(0.0f)),
                     cam.sigma_min.xyz, cam.sigma_max.xyz);
 #endif
-    int end = journey(SCENE_PASS cam, ray, REAL(0.0f), reach, true).end;
+    int end = journey(SCENE_PASS cam, ray, REAL(0.0f), reach, true TILED_ARG(false, 0)).end;
     return end == END_MISS || end == END_REACHED;
 }
 #endif

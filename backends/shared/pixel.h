@@ -24,7 +24,12 @@ Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
     }
 #endif
 #endif
-    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false));
+#if VIEW_TILES
+    /* The view tile of the pixel (engine/view_tiles.py): its lists serve the first leg. */
+    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
+    int tile = (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);
+#endif
+    Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false) TILED_ARG(true, tile));
     ray = end.ray;
     MeshHit hit = end.hit;
     if (end.end == END_LIMIT) {

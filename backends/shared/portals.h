@@ -45,6 +45,24 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
     return best;
 }
 
+#if VIEW_TILES && PORTAL_TREE
+/* nearest_portal from the count rows of the view tiles' table from first (engine/view_tiles.py): a camera
+ * ray's first leg, whose tile's list holds every portal its rays can meet. */
+FORCE_INLINE Event tile_portal(SCENE_DECL real3 o, real3 r, real t_min, int skip, int first, int count)
+{
+    Event best = no_event();
+    for (int k = first; k < first + count; ++k) {
+        int4 e = VIEW_TILE(k).entry;
+        /* Nearest first: a leaf farther than the best hit holds no nearer one (nor a tie). */
+        if (TO_REAL(AS_FLOAT(e.y)) > best.t) {
+            break;
+        }
+        best = portal_quad(SCENE_PASS best, e.x, o, r, t_min, skip);
+    }
+    return best;
+}
+#endif
+
 /* Through portal row at t along the leg (portals.teleport): the segment's length is added, then the
  * hit point goes through X and r, w, d0 through its linear part (renormalised, kept if degenerate);
  * a new leg starts on the target quad, which the ray is then leaving. The active box is the caller's. */

@@ -21,7 +21,7 @@ from test_parity_portals import doors, portal_in_aberrations
 from aberrant.bench.space import space_scene
 from backends.base import AOVS
 from components import Transform
-from engine.camera_view import scene_camera
+from engine.camera_view import pack_camera, scene_camera
 from engine.packing import ScenePacker
 from engine.scene import Scene
 from engine.settings import Settings
@@ -195,3 +195,38 @@ def test_every_ray_takes_all_its_events_among_five_thousand_portals(backend_fact
     frame = render_scene(backend, lambda: facing_among_many(2500), (32, 24))
     assert np.all(frame.events == 16)
     assert np.all(frame.color[..., :3] == (255, 0, 255))
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), TREES_AND_LOOPS)
+def test_view_tiles_give_the_trees_frames(backend_factory, backend_name, precision):
+    """The first legs of camera rays take their portals from the view tiles' lists (engine/view_tiles.py): the
+    frames are the tree's, to the bit, from cameras looking into the crowd, standing in a portal's leaf and
+    turned at random; with a box holding the camera the tiles are not used."""
+    backend = backend_factory(backend_name, precision)
+    rng = np.random.default_rng(11)
+    scene = crowded("portals", 60, seed=10)
+    scene.add_aberration("held", (0.2, 0.0, 0.0), position=(30.0, 1.0, 30.0), scale=(4.0, 4.0, 4.0))
+    cameras = [((0.0, 1.8, 6.0), (0.0, 1.0, -3.0)), ((30.0, 1.0, 30.0), (0.0, 1.0, -3.0))]
+    for name in ("p4", "p12", "p30"):
+        at = np.asarray(scene.get(scene.entity(name), Transform).position)
+        cameras.append((tuple(at + rng.uniform(-0.3, 0.3, 3)), tuple(at + rng.uniform(-3.0, 3.0, 3))))
+    try:
+        tiled = []
+        for position, look_at in cameras:
+            scene.set_camera(position, look_at=look_at, fov_deg=float(rng.uniform(40.0, 100.0)))
+            frames = []
+            for defines in ({}, {"VIEW_TILES": 0}):
+                backend.extra_defines = dict(defines)
+                frames.append(render(backend, scene, SIZE))
+            same_frames(*frames)
+            backend.extra_defines = {}
+            view = scene_camera(scene)
+            row = pack_camera(
+                view, backend._origin, precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
+            )
+            features = backend._frame_features(view, *SIZE)
+            tiled.append(backend._frame_view_tiles(view, *SIZE, features, row) is not None)
+        assert tiled[0] and not tiled[1] and sum(tiled) >= 3
+    finally:
+        backend.extra_defines = {}
+        scene.close()

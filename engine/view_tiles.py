@@ -1,0 +1,126 @@
+"""Per-frame view tiles: for each screen tile, the portal rows the first leg of its primary rays may meet, so
+the kernels loop over a short list there instead of walking the portals' tree.
+
+A primary ray meets a portal only inside that row's leaf of the space tree (grown by the kernels' SPACE_PAD),
+so a tile's list holds every leaf whose box any ray of the tile can enter: the leaves the camera's
+pyramid sees (:func:`engine.camera_view.seen_leaves`), each projected through its box's 8 corners to a pixel
+range (the image of a box in front of the camera lies in the hull of its corners' images) and padded by pixels
+for the rays' rounding; a leaf with a corner at or near the camera plane covers every tile. The kernels test
+the same rows with the same test, and a tie goes to the lower row whatever the order, so the frame is the
+tree's one. The table (:data:`engine.layout.VIEW_TILE`) is CSR: a header row per tile, then the rows.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from engine import layout
+from engine.camera_view import CameraView, seen_leaves
+
+#: log2 of a tile's side in pixels: 8 x 8, the GLSL backend's work-group, whose 4 x 2 lane blocks each lie in
+#: one tile (llvmpipe runs a block's 8 lanes as one vector: one list for them all).
+TILE_LOG2 = 3
+#: The kernels' widest per-ray growth of a leaf (SPACE_PAD in core.h, float32's), times max(1, |camera|).
+KERNEL_PAD = 1e-5
+#: Pixels added on each side of a leaf's projected range: the rays' subpixel point lies in [0, 1) of their
+#: pixel, and float32 directions stray by far less than a pixel.
+PIXEL_PAD = 1.0
+#: Relative margin of a projected range, on top of the pixels (rounding of the projection near the edges).
+RANGE_MARGIN = 1e-3
+#: A leaf's distance from the camera, as the kernels' loops stop at it, is shrunk by this relative margin: far
+#: above float32's rounding of a hit's t.
+NEAR_MARGIN = 1e-3
+#: A corner nearer the camera plane than this (times max(1, its distance)) makes its leaf cover every tile.
+NEAR_PLANE = 1e-3
+
+
+def tile_grid(width: int, height: int, log2: int = TILE_LOG2) -> tuple[int, int]:
+    """Tiles across and down an image."""
+    side = 1 << log2
+    return -(-width // side), -(-height // side)
+
+
+def leaf_tiles(
+    view: CameraView, width: int, height: int, origin: np.ndarray, lo: np.ndarray, hi: np.ndarray, log2: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """The tile ranges ``(x0, y0, x1, y1)`` (inclusive; x1 < x0 for none) of leaves lo/hi (n, 3,
+    camera-relative): every tile one of whose primary rays can enter the leaf grown by the kernels' pad; and
+    each leaf's distance from the camera, shrunk by :data:`NEAR_MARGIN` (no ray meets the leaf nearer)."""
+    apex = np.asarray(view.position, dtype=np.float64) - origin
+    grow = 2.0 * KERNEL_PAD * max(1.0, float(np.linalg.norm(apex)))
+    lo = lo - apex - grow
+    hi = hi - apex + grow
+    grow_rel = 2.0 * KERNEL_PAD * np.maximum(np.abs(lo), np.abs(hi))
+    lo, hi = lo - grow_rel, hi + grow_rel
+    distance = np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0), axis=1) * (1.0 - NEAR_MARGIN)
+    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)  # (8, 3): hi where set
+    corners = np.where(pick[None], hi[:, None], lo[:, None])  # (n, 8, 3)
+    camera = corners @ view.rotation  # right, up, back components
+    depth = -camera[..., 2]
+    size = np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi)), axis=1)  # at least each corner's distance
+    near = depth.min(axis=1) <= NEAR_PLANE * np.maximum(1.0, size)
+    depth = np.where(depth > 0.0, depth, 1.0)
+    t = math.tan(math.radians(view.fov_deg) / 2.0)
+    aspect = width / height
+    # Continuous pixel coordinates i + s, j + s of each corner's image (primary_ray's mapping inverted).
+    u = (camera[..., 0] / depth / (aspect * t) + 1.0) * (width / 2.0)
+    v = (1.0 - camera[..., 1] / depth / t) * (height / 2.0)
+    u0, u1, v0, v1 = u.min(axis=1), u.max(axis=1), v.min(axis=1), v.max(axis=1)
+    pad_u = PIXEL_PAD + RANGE_MARGIN * (np.maximum(-u0, u1) + width)
+    pad_v = PIXEL_PAD + RANGE_MARGIN * (np.maximum(-v0, v1) + height)
+    tiles_x, tiles_y = tile_grid(width, height, log2)
+    limit = float(1 << 30)
+    i0 = np.clip(np.floor(u0 - pad_u), -1, limit)
+    i1 = np.clip(np.floor(u1 + pad_u), -1, limit)
+    j0 = np.clip(np.floor(v0 - pad_v), -1, limit)
+    j1 = np.clip(np.floor(v1 + pad_v), -1, limit)
+    out = np.empty((len(lo), 4), np.int64)
+    out[:, 0] = np.clip(i0, 0, width - 1).astype(np.int64) >> log2
+    out[:, 1] = np.clip(j0, 0, height - 1).astype(np.int64) >> log2
+    out[:, 2] = np.clip(i1, 0, width - 1).astype(np.int64) >> log2
+    out[:, 3] = np.clip(j1, 0, height - 1).astype(np.int64) >> log2
+    off = (i1 < 0) | (j1 < 0) | (i0 > width - 1) | (j0 > height - 1)
+    out[off] = (0, 0, -1, -1)
+    out[near] = (0, 0, tiles_x - 1, tiles_y - 1)
+    return out, distance
+
+
+def _tile_rows(
+    ranges: np.ndarray, rows: np.ndarray, distance: np.ndarray, tiles_x: int, tiles: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each tile's rows among those of ``ranges``: the rows and their distances sorted by tile, then nearest
+    first, and the count per tile."""
+    near_first = np.lexsort((rows, distance))
+    ranges, rows, distance = ranges[near_first], rows[near_first], distance[near_first]
+    w = np.maximum(ranges[:, 2] - ranges[:, 0] + 1, 0)
+    h = np.maximum(ranges[:, 3] - ranges[:, 1] + 1, 0)
+    area = w * h
+    leaf = np.repeat(np.arange(len(rows)), area)
+    local = np.arange(len(leaf)) - np.repeat(np.cumsum(area) - area, area)
+    width = w[leaf]
+    tile = (ranges[leaf, 1] + local // width) * tiles_x + ranges[leaf, 0] + local % width
+    order = np.argsort(tile, kind="stable")  # the leaves' order, nearest first, within each tile
+    leaf = leaf[order]
+    return rows[leaf], distance[leaf], np.bincount(tile, minlength=tiles)
+
+
+def view_tiles(
+    view: CameraView, width: int, height: int, origin: np.ndarray, nodes: np.ndarray, root: int, log2: int = TILE_LOG2
+) -> np.ndarray:
+    """The frame's :data:`engine.layout.VIEW_TILE` table: for each tile the portal rows (of the tree in
+    ``nodes`` from ``root``) its primary rays' first legs may meet."""
+    tiles_x, tiles_y = tile_grid(width, height, log2)
+    tiles = tiles_x * tiles_y
+    leaves = seen_leaves(view, width / height, origin, nodes, root)
+    lo, hi = nodes["bounds_min"][leaves].astype(np.float64), nodes["bounds_max"][leaves].astype(np.float64)
+    ranges, distance = leaf_tiles(view, width, height, origin, lo, hi, log2)
+    rows, near, counts = _tile_rows(ranges, nodes["first"][leaves].astype(np.int64), distance, tiles_x, tiles)
+    table = np.zeros(tiles + len(rows), layout.VIEW_TILE_DTYPE)
+    entry = table["entry"]
+    entry[:tiles, 0] = tiles + np.cumsum(counts) - counts
+    entry[:tiles, 1] = counts
+    entry[tiles:, 0] = rows
+    entry[tiles:, 1] = near.astype(np.float32).view(np.int32)
+    return table

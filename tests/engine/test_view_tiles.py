@@ -1,0 +1,118 @@
+"""The view tiles (engine/view_tiles.py): every portal a primary ray's first leg passes through is in the list
+of that ray's tile, no nearer than the distance stored beside it, for random scenes and cameras (in front of
+many portals, near and inside their leaves, leaves across the camera plane, any subpixel point)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scenes import crowded
+
+from backends.reference.directions import affine_points, linear_vectors
+from engine.camera_view import CameraView, seen_leaves, view_reaches
+from engine.maths import quat_to_matrix
+from engine.packing import ScenePacker
+from engine.view_tiles import tile_grid, view_tiles
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=4)
+    return quat_to_matrix(tuple(q / np.linalg.norm(q)))
+
+
+def first_leg_hits(
+    view: CameraView, width: int, height: int, origin: np.ndarray, portals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every (pixel, portal row) whose primary ray passes through the linked quad at t > 0, and its t: the
+    reference's portal test, each quad against every ray."""
+    o = view.position - origin
+    r = view.primary_directions(width, height).reshape(-1, 3)
+    pixels, rows, ts = [], [], []
+    with np.errstate(all="ignore"):
+        for row, portal in enumerate(portals):
+            if portal["meta"][0] < 0:
+                continue
+            m = portal["world_to_local"].astype(np.float64).reshape(3, 4)
+            a, v = affine_points(m, np.broadcast_to(o, r.shape)), linear_vectors(m, r)
+            t = -a[:, 2] / np.where(v[:, 2] != 0.0, v[:, 2], np.nan)
+            x, y = a[:, 0] + t * v[:, 0], a[:, 1] + t * v[:, 1]
+            hit = np.flatnonzero((t > 0.0) & (np.abs(x) <= 1.0) & (np.abs(y) <= 1.0))
+            pixels.append(hit)
+            rows.append(np.full(len(hit), row))
+            ts.append(t[hit])
+    return np.stack([np.concatenate(pixels), np.concatenate(rows)]), np.concatenate(ts)
+
+
+def check_tiles(view: CameraView, width: int, height: int, origin: np.ndarray, packed) -> int:
+    """Asserts that every first-leg hit of the frame is in its tile's list; returns how many hits there were."""
+    nodes, root = packed.tables["space_nodes"], int(packed.tables["settings"]["space_roots"][0][0])
+    portals = packed.tables["portals"][: packed.counts["portals"]]
+    table = view_tiles(view, width, height, origin, nodes, root)
+    entry = table["entry"]
+    (pixels, rows), t = first_leg_hits(view, width, height, origin, portals)
+    tiles_x, _ = tile_grid(width, height)
+    j, i = pixels // width, pixels % width
+    tile = (j >> 3) * tiles_x + (i >> 3)
+    for p, row, tile_k, t_k in zip(pixels, rows, tile, t, strict=True):
+        first, count = entry[tile_k, 0], entry[tile_k, 1]
+        listed = entry[first : first + count]
+        where = np.flatnonzero(listed[:, 0] == row)
+        assert where.size == 1, f"pixel {p}: portal {row} missing from tile {tile_k}"
+        near = listed[where[0], 1:2].view(np.float32)[0]
+        assert near <= t_k, f"pixel {p}: portal {row} at t {t_k} listed at {near}"
+        assert np.all(np.diff(listed[:, 1].view(np.float32)) >= 0.0)  # nearest first
+    return len(t)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_every_first_leg_portal_is_in_its_tiles_list(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    scene = crowded("portals", 60, seed=seed)
+    packer = ScenePacker("f32")
+    packer.sync(scene)
+    packed = packer.packed
+    origin = np.asarray(packed.origin, dtype=np.float64)
+    nodes, root = packed.tables["space_nodes"], int(packed.tables["settings"]["space_roots"][0][0])
+    leaves = np.flatnonzero(nodes["count"][: len(nodes)] == 1)
+    leaves = leaves[leaves < 2 * packed.counts["portals"]]
+    hits = 0
+    for k in range(8):
+        width, height = (int(rng.integers(17, 90)), int(rng.integers(17, 90)))
+        if k % 2:  # inside or beside a leaf: it straddles the camera plane or fills the view
+            leaf = int(rng.choice(leaves))
+            lo, hi = nodes["bounds_min"][leaf].astype(np.float64), nodes["bounds_max"][leaf].astype(np.float64)
+            position = origin + lo + rng.uniform(-0.2, 1.2, 3) * (hi - lo)
+        else:
+            position = np.array([rng.uniform(-5.0, 5.0), rng.uniform(0.2, 3.5), rng.uniform(-2.0, 8.0)])
+        rotation = random_rotation(rng)
+        if k % 4 == 0:  # looking into the crowd from the camera of the scene
+            forward = np.array([0.0, 1.0, -3.0]) - position
+            forward /= np.linalg.norm(forward)
+            right = np.cross(forward, [0.0, 1.0, 0.0])
+            right /= np.linalg.norm(right)
+            rotation = np.stack([right, np.cross(right, forward), -forward], axis=1)
+        view = CameraView(position, rotation, float(rng.uniform(20.0, 120.0)), tuple(rng.uniform(0.0, 1.0, 2)))
+        hits += check_tiles(view, width, height, origin, packed)
+        leaves_seen = seen_leaves(view, width / height, origin, nodes, root)
+        assert bool(leaves_seen.size) == view_reaches(view, width / height, origin, nodes, root)
+    assert hits > 0
+
+
+def test_a_leaf_across_the_camera_plane_covers_every_tile() -> None:
+    scene = crowded("portals", 20, seed=3)
+    packer = ScenePacker("f32")
+    packer.sync(scene)
+    packed = packer.packed
+    origin = np.asarray(packed.origin, dtype=np.float64)
+    nodes, root = packed.tables["space_nodes"], int(packed.tables["settings"]["space_roots"][0][0])
+    leaf = int(np.flatnonzero(nodes["count"] == 1)[0])
+    lo, hi = nodes["bounds_min"][leaf].astype(np.float64), nodes["bounds_max"][leaf].astype(np.float64)
+    view = CameraView(origin + 0.5 * (lo + hi), np.eye(3), 60.0)
+    table = view_tiles(view, 40, 30, origin, nodes, root)
+    tiles = math.prod(tile_grid(40, 30))
+    entry = table["entry"]
+    for k in range(tiles):
+        first, count = entry[k, 0], entry[k, 1]
+        assert int(nodes["first"][leaf]) in entry[first : first + count, 0]
