@@ -67,3 +67,5 @@
 /* The scene tables are global storage buffers (bindings.glsl): no parameter to pass. */
 #define SCENE_DECL
 #define SCENE_PASS
+#define PIXEL_SCENE_DECL
+#define PIXEL_SCENE_OPEN

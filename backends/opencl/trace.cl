@@ -52,7 +52,7 @@ __kernel void trace(__global const Settings* settings,
     sc.triangle_normals = triangle_normals;
     sc.texels = texels;
     sc.view_tiles = view_tiles;
-    Pixel px = trace_pixel(sc, cam, i, j);
+    Pixel px = trace_pixel(&sc, cam, i, j);
     int index = j * cam.size.x + i;
     if (color_out != 0) {
         color_out[index] = convert_uchar4(px.color); /* already integral 0..255 */

@@ -3,11 +3,11 @@
  * The GLSL twin is backends/glsl/bindings.glsl (global storage buffers). Here
  * the tables are __global pointers gathered in a private struct that every
  * core function takes as its first parameter through SCENE_DECL / SCENE_PASS
- * (both empty in GLSL). A kernel builds it once:
+ * (both empty in GLSL). A kernel builds it once and hands trace_pixel its address (PIXEL_SCENE_DECL):
  *
  *     SceneTables sc;
  *     sc.settings = settings; sc.triangles = triangles; ...
- *     Pixel px = trace_pixel(sc, camera[0], i, j);
+ *     Pixel px = trace_pixel(&sc, camera[0], i, j);
  */
 
 typedef struct SceneTables {
@@ -30,6 +30,11 @@ typedef struct SceneTables {
 
 #define SCENE_DECL SceneTables sc,
 #define SCENE_PASS sc,
+/* trace_pixel takes the tables by address and copies them in (PIXEL_SCENE_OPEN): PoCL keeps the kernel's
+ * struct per work-item in stack memory written 8 bytes at a time, and a by-value call reloaded it 32 bytes
+ * at a time, each load stalled on the stores it could not forward from (2-4 % of a Euclidean frame). */
+#define PIXEL_SCENE_DECL const SceneTables* tables,
+#define PIXEL_SCENE_OPEN SceneTables sc = *tables;
 
 /* Table access: a record (an lvalue, so .field reads only that field). */
 #define SETTINGS (sc.settings[0])

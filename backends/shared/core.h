@@ -82,7 +82,8 @@
  *                      own before each mesh search (journey.h: llvmpipe runs a loop's body masked for all
  *                      its lanes; no cost on PoCL); 0: one pass of the event loop per leg, for A/B only
  *
- * Entry point (pixel.h): Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j).
+ * Entry point (pixel.h): Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j) (OpenCL: the
+ * tables by address, bindings_cl.h).
  * Rules of the subset: no overloading, no `inout`/`out` (functions return
  * structs), no vector comparisons, no v[i] (VIDX3), literals with an `f`
  * suffix wrapped in REAL() where they meet reals, no float3-real mixing

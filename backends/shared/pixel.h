@@ -1,8 +1,9 @@
 /* pixel.h -- the kernels' entry point: a pixel's primary ray, its journey (journey.h) and the colour of
  * what it ends on (shade.h). */
 
-Pixel trace_pixel(SCENE_DECL Camera cam, int i, int j)
+Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
 {
+    PIXEL_SCENE_OPEN
     Ray ray = primary_ray(cam, i, j);
     Pixel px;
     px.color = quantize_rgba(SETTINGS.background.xyz);

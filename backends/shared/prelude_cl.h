@@ -17,6 +17,15 @@
 /* No contraction into fused multiply-adds: the watertight edge functions need
  * a*b - c*d computed as two rounded products (GLSL says `precise`). */
 #pragma OPENCL FP_CONTRACT OFF
+/* floor as the compiler's own exact floor (one rounding instruction on a CPU with SSE4.1): PoCL 3.1 maps
+ * floor to a library routine of compares and branches instead. Same value for every input, NaN and
+ * signed zeros included. Elsewhere (another driver's compiler) the device's floor stays. */
+#if defined(__has_builtin)
+#if __has_builtin(__builtin_elementwise_floor)
+#undef floor
+#define floor(x) __builtin_elementwise_floor(x)
+#endif
+#endif
 
 /* --- scalar and vector types ------------------------------------------------------ */
 #if REAL_IS_DOUBLE

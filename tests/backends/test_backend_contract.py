@@ -368,7 +368,8 @@ def preprocess(source: str) -> str:
     """The lines a compiler keeps after ``#if``/``#ifdef``/``#ifndef``/``#elif``/``#else``/``#endif``.
 
     A small C preprocessor for the conditions the kernels use: object-like ``#define``s with
-    integer expressions, ``defined()``, ``!``, ``&&``, ``||`` and comparisons (undefined names are 0).
+    integer expressions, ``defined()``, ``!``, ``&&``, ``||`` and comparisons (undefined names are 0); the
+    conditions of skipped blocks are not evaluated.
     """
     defines: dict[str, str] = {}
 
@@ -392,8 +393,10 @@ def preprocess(source: str) -> str:
         m = _DIRECTIVE.match(line)
         word, rest = (m.group(1), m.group(2)) if m else ("", "")
         if word in ("if", "ifdef", "ifndef"):
-            holds = bool(evaluate(rest)) if word == "if" else (rest in defines) == (word == "ifdef")
-            taken = active and holds
+            # As a compiler does, a condition inside a skipped block is not evaluated (it may use what only the
+            # enclosing condition proved defined, e.g. __has_builtin).
+            holds = active and (bool(evaluate(rest)) if word == "if" else (rest in defines) == (word == "ifdef"))
+            taken = holds
             stack.append((active, taken))
             active = taken
         elif word == "elif":
