@@ -12,11 +12,12 @@ third of the binary path.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from engine.bvh_wide import collapse_slots, wide_nodes
-from engine.layout import BVH_WIDTHS
+from engine.layout import BVH_WIDTHS, bvh_width
 from engine.tlas import AabbTree
 
 #: The top-level tree's widths: binary (the :class:`engine.tlas.AabbTree`'s own table), 4- or 8-wide.
@@ -71,3 +72,35 @@ class WideTlas:
                 self.nodes[f"hi_{name}"][row].reshape(-1)[k] = tree.nodes["bounds_max"][node, axis]
             rows.add(row)
         return sorted(rows)
+
+
+class TlasLanes(NamedTuple):
+    """A ``tlas_nodes`` table (binary or wide) as rows of ``width`` lanes, each a child's box, for walks on
+    the host (:func:`engine.camera_view.seen_instances`): lane ``row * width + k`` of ``lo``/``hi`` (float64),
+    ``kind`` 1 a leaf over instance row ``child``, 0 an interior child (row ``child``), -1 none. Row 0 is the
+    root's."""
+
+    width: int
+    lo: np.ndarray
+    hi: np.ndarray
+    child: np.ndarray
+    kind: np.ndarray
+
+    @classmethod
+    def of(cls, nodes: np.ndarray) -> TlasLanes:
+        """The lanes of a ``tlas_nodes`` table (a binary node's lanes are its two children's boxes)."""
+        width = bvh_width(nodes)
+        if width == 2:
+            first, count = nodes["first"].astype(np.int64), nodes["count"].astype(np.int64)
+            kids = np.where(count == 0, first, 0)[:, None] + np.arange(2)  # (n, 2)
+            kids = np.minimum(kids, len(nodes) - 1)
+            lane_count = np.where(count[:, None] == 0, np.minimum(count[kids], 1), -1)
+            child = np.where(lane_count == 1, first[kids], kids)
+            lo = nodes["bounds_min"][kids, :3].reshape(-1, 3)
+            hi = nodes["bounds_max"][kids, :3].reshape(-1, 3)
+            return cls(2, lo.astype(np.float64), hi.astype(np.float64), child.ravel(), lane_count.ravel())
+        lo = np.stack([nodes[f"lo_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
+        hi = np.stack([nodes[f"hi_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
+        return cls(
+            width, lo, hi, nodes["child"].reshape(-1).astype(np.int64), nodes["count"].reshape(-1).astype(np.int64)
+        )

@@ -372,7 +372,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             defines.update(self.extra_defines)
             program = self._program(defines)
             if tiles is not None:
-                self._device.bind_view_tiles(tiles)
+                self._device.bind_view_tiles(tiles.table)
             self._device.bind(row)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:

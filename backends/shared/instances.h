@@ -134,3 +134,34 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
 #endif
     return best;
 }
+
+#if INSTANCE_TILES
+/* nearest_mesh over the count rows of the view tiles' table from first (engine/view_tiles.py): a camera ray's
+ * first leg, whose tile's list holds every instance its rays can enter, nearest first with a lower bound of
+ * its hits' t; each is culled by its exact bounds as in the tree's walk. Equal t across instances goes to the
+ * lower row (test_triangle), so the list's order is unseen. */
+FORCE_INLINE MeshHit tile_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max, int first, int count STOP_DECL)
+{
+    MeshHit best;
+    best.t = t_max;
+    best.bary = R3S(0.0f);
+    best.instance = -1;
+    best.triangle = -1;
+    real3 inv = safe_inverse(d);
+    for (int k = first; k < first + count; ++k) {
+        int4 e = VIEW_TILE(k).entry;
+        /* Nearest first: an instance farther than the best hit holds no nearer one (nor a tie). */
+        if (TO_REAL(AS_FLOAT(e.y)) > best.t) {
+            break;
+        }
+        real2 h = slab(o, inv, INSTANCE(e.x).bounds_min.xyz, INSTANCE(e.x).bounds_max.xyz);
+        if (slab_hit(h, t_min, best.t)) {
+            best = trace_instance(SCENE_PASS best, e.x, o, d, t_min STOP_PASS);
+        }
+#if HAS_SHADOWS
+        k = best.t < t_stop ? first + count : k;
+#endif
+    }
+    return best;
+}
+#endif
