@@ -368,8 +368,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             features = self._frame_features(camera, width, height)
             defines = self._defines(aovs, features)
             tiles = self._frame_view_tiles(camera, width, height, features, row)
-            defines.update(self._frame_space_defines(features, row, self.precision), **shared.view_tile_defines(tiles))
-            defines.update(self.extra_defines)
+            defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
+            defines.update(shared.view_tile_defines(tiles))
             program = self._program(defines)
             if tiles is not None:
                 self._device.bind_view_tiles(tiles.table)

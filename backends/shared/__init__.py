@@ -240,10 +240,12 @@ class UploadedScene:
     #: Whether the kernels walk the space trees' 4-wide forms (SPACE_WIDE), not the binary ones: each
     #: backend's own, from scripts/space_tree_ab.py A/Bs.
     space_wide: ClassVar[bool] = False
-    #: Whether camera rays take their first leg's portals (VIEW_TILES) and instances (INSTANCE_TILES) from the
-    #: frame's view tiles where that frame allows (interleaved A/Bs in README.md's table; boxes keep their tree:
-    #: no gain there).
+    #: Whether camera rays take their first leg's portals (VIEW_TILES) from the frame's view tiles where that
+    #: frame allows (interleaved A/B in README.md's table; boxes keep their tree: no gain there).
     view_tiles: bool = True
+    #: ... and their first mesh search's instances (INSTANCE_TILES): off unless asked for (``INSTANCE_TILES=1``
+    #: in extra_defines): the hotel's frames gain, the village's lose (README.md, "Measured and dropped").
+    instance_tiles: ClassVar[bool] = False
     #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
     #: building that section of the tiles).
     extra_defines: dict[str, int]
@@ -355,7 +357,7 @@ class UploadedScene:
             and self._portal_root is not None
         )
         instances = (
-            self.extra_defines.get("INSTANCE_TILES", 1)
+            self.extra_defines.get("INSTANCE_TILES", int(self.instance_tiles))
             and self._bounds is not None
             and len(self._bounds[0]) >= INSTANCE_TILE_MIN
         )
@@ -389,8 +391,8 @@ class FrameTiles(NamedTuple):
 
 
 def view_tile_defines(tiles: FrameTiles | None) -> dict[str, int]:
-    """The defines of a frame with view tiles (none without: those frames compile as before)."""
+    """The defines of a frame's view tiles, after the backend's extra defines (which ask for the tiles: the
+    frame decides whether its kernel reads them)."""
     if tiles is None:
-        return {}
-    on = {"VIEW_TILES": tiles.portals, "INSTANCE_TILES": tiles.instances}
-    return {name: 1 for name, used in on.items() if used} | {"VIEW_TILE_LOG2": TILE_LOG2}
+        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0}
+    return {"VIEW_TILES": int(tiles.portals), "INSTANCE_TILES": int(tiles.instances), "VIEW_TILE_LOG2": TILE_LOG2}

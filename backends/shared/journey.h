@@ -351,15 +351,9 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         mesh.instance = -1;
         mesh.triangle = -1;
         if (search) {
-#if INSTANCE_TILES
-            /* A camera ray's first leg (no event crossed yet): the tile's instances, nearest first. */
-            if (tiled && ray.n == 0 && tile_count >= 0) {
-                mesh = tile_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut, tile_first, tile_count STOP_PASS);
-            } else
-#endif
-            {
-                mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS);
-            }
+            /* A camera ray's first leg (no event crossed yet) takes the tile's instances, nearest first. */
+            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS
+                                    TILE_LIST_ARG(tile_first, tiled && ray.n == 0 ? tile_count : -1));
         }
 #if HAS_SPACE
         kind = leg_event_kind(ev, mesh, ray.o_len);

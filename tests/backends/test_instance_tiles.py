@@ -1,7 +1,8 @@
-"""The first leg of a camera ray takes its instances from its view tile's list (engine/view_tiles.py,
-INSTANCE_TILES): the frames are the instance tree's to the bit, from cameras among many instances, inside
-their bounds and turned at random; with portals and boxes in the scene, with shadows (their rays keep the
-tree), with tiles too full to list; and with a box holding the camera the tiles are not used."""
+"""The first leg of a camera ray takes its instances from its view tile's list where asked for
+(engine/view_tiles.py, INSTANCE_TILES=1): the frames are the instance tree's to the bit, from cameras among
+many instances, inside their bounds and turned at random; with portals and boxes in the scene, with shadows
+(their rays keep the tree), with tiles too full to list; with a box holding the camera the tiles are not
+used, nor with fewer than INSTANCE_TILE_MIN instances."""
 
 from __future__ import annotations
 
@@ -14,17 +15,20 @@ from test_space_trees import SIZE, TREES_AND_LOOPS, same_frames
 from backends.shared import INSTANCE_TILE_MIN
 from engine.camera_view import pack_camera, scene_camera
 
-#: Frames with the instances' lists, without them, and with every tile of over 3 instances on the tree.
-VARIANTS = ({}, {"INSTANCE_TILES": 0}, {"INSTANCE_TILE_MAX": 3})
+#: Frames with the instances' lists, without them (the default), and with every tile of over 3 on the tree.
+ON = {"INSTANCE_TILES": 1}
+VARIANTS: tuple[dict[str, int], ...] = (ON, {}, {**ON, "INSTANCE_TILE_MAX": 3})
 
 
 def instance_tiles_used(backend, scene) -> bool:
-    """Whether the backend's frame of the scene's camera reads the instances' lists."""
+    """Whether the backend's frame of the scene's camera reads the instances' lists (when asked for)."""
+    backend.extra_defines = dict(ON)
     view = scene_camera(scene)
     row = pack_camera(
         view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
     )
     tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
+    backend.extra_defines = {}
     return tiles is not None and tiles.instances
 
 
@@ -69,5 +73,9 @@ def test_few_instances_keep_the_tree(backend_factory, backend_name, precision):
     try:
         render(backend, scene, SIZE)
         assert not instance_tiles_used(backend, scene)
+        scene.add_mesh("more", "box", position=(0.0, 1.0, 0.0))
+        scene.add_mesh("most", "box", position=(1.0, 1.0, 0.0))
+        render(backend, scene, SIZE)
+        assert instance_tiles_used(backend, scene)
     finally:
         scene.close()
