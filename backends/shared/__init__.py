@@ -243,9 +243,9 @@ class UploadedScene:
     #: Whether camera rays take their first leg's portals (VIEW_TILES) from the frame's view tiles where that
     #: frame allows (interleaved A/B in README.md's table; boxes keep their tree: no gain there).
     view_tiles: bool = True
-    #: ... and their first mesh search's instances (INSTANCE_TILES): off unless asked for (``INSTANCE_TILES=1``
-    #: in extra_defines): the hotel's frames gain, the village's lose (README.md, "Measured and dropped").
-    instance_tiles: ClassVar[bool] = False
+    #: ... and their first mesh search's instances (INSTANCE_TILES): each backend's own (README.md's table; on
+    #: PoCL only the hotel's frames gained, the village's and the house's lost), ``INSTANCE_TILES=1`` asks.
+    instance_tiles: bool = False
     #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
     #: building that section of the tiles).
     extra_defines: dict[str, int]
@@ -363,6 +363,10 @@ class UploadedScene:
         )
         if not (portals or instances):
             return None
+        # A Euclidean frame without shadows searches the meshes only on its camera rays' first legs: the lists
+        # serve every search (none too long to list), and the tree's walk is compiled out.
+        only = bool(instances) and not (features.portals or features.aberration_modes or features.shadows)
+        only = only and bool(self.extra_defines.get("INSTANCE_TILES_ONLY", 1))
         table = view_tiles(
             camera,
             width,
@@ -370,9 +374,9 @@ class UploadedScene:
             self._origin,
             portals=(self._space_nodes, self._portal_root) if portals and self._portal_root is not None else None,
             instances=(self._tlas_lanes, *self._bounds) if instances and self._bounds is not None else None,
-            instance_max=self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
+            instance_max=1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
         )
-        return FrameTiles(table, bool(portals), bool(instances))
+        return FrameTiles(table, bool(portals), bool(instances), only)
 
 
 #: Frames with fewer instances keep the instance tree for every search (a list gains nothing over a short walk).
@@ -388,11 +392,18 @@ class FrameTiles(NamedTuple):
     table: np.ndarray
     portals: bool
     instances: bool
+    #: Whether the instances' lists serve every mesh search of the frame (INSTANCE_TILES_ONLY).
+    instances_only: bool = False
 
 
 def view_tile_defines(tiles: FrameTiles | None) -> dict[str, int]:
     """The defines of a frame's view tiles, after the backend's extra defines (which ask for the tiles: the
     frame decides whether its kernel reads them)."""
     if tiles is None:
-        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0}
-    return {"VIEW_TILES": int(tiles.portals), "INSTANCE_TILES": int(tiles.instances), "VIEW_TILE_LOG2": TILE_LOG2}
+        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0, "INSTANCE_TILES_ONLY": 0}
+    return {
+        "VIEW_TILES": int(tiles.portals),
+        "INSTANCE_TILES": int(tiles.instances),
+        "INSTANCE_TILES_ONLY": int(tiles.instances_only),
+        "VIEW_TILE_LOG2": TILE_LOG2,
+    }

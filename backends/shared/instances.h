@@ -103,6 +103,10 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         return best; /* a zero or NaN direction hits nothing */
     }
     real3 inv = safe_inverse(d);
+#if INSTANCE_TILES_ONLY
+    /* Every search of the frame is a camera ray's first leg, with its list (the host's INSTANCE_TILES_ONLY). */
+    best = tile_mesh(SCENE_PASS o, d, t_min, t_max, list_first, list_count STOP_PASS);
+#else
 #if INSTANCE_TILES
     if (list_count >= 0) {
         return tile_mesh(SCENE_PASS o, d, t_min, t_max, list_first, list_count STOP_PASS);
@@ -175,6 +179,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         i = best.t < t_stop ? count : i;
 #endif
     }
+#endif
 #endif
     return best;
 }

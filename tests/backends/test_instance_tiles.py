@@ -15,9 +15,15 @@ from test_space_trees import SIZE, TREES_AND_LOOPS, same_frames
 from backends.shared import INSTANCE_TILE_MIN
 from engine.camera_view import pack_camera, scene_camera
 
-#: Frames with the instances' lists, without them (the default), and with every tile of over 3 on the tree.
+#: Frames with the instances' lists, without them, with every tile of over 3 on the tree (where the tree is
+#: compiled in), and with the tree compiled in where the lists could serve alone.
 ON = {"INSTANCE_TILES": 1}
-VARIANTS: tuple[dict[str, int], ...] = (ON, {}, {**ON, "INSTANCE_TILE_MAX": 3})
+VARIANTS: tuple[dict[str, int], ...] = (
+    ON,
+    {"INSTANCE_TILES": 0},
+    {**ON, "INSTANCE_TILE_MAX": 3},
+    {**ON, "INSTANCE_TILES_ONLY": 0, "INSTANCE_TILE_MAX": 3},
+)
 
 
 def instance_tiles_used(backend, scene) -> bool:
@@ -30,6 +36,29 @@ def instance_tiles_used(backend, scene) -> bool:
     tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
     backend.extra_defines = {}
     return tiles is not None and tiles.instances
+
+
+def lists_alone(backend, scene) -> bool:
+    """Whether the lists serve every mesh search of the frame (a Euclidean one without shadows)."""
+    view = scene_camera(scene)
+    backend.extra_defines = dict(ON)
+    row = pack_camera(
+        view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
+    )
+    tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
+    backend.extra_defines = {}
+    return tiles is not None and tiles.instances_only
+
+
+def frames_agree(backend, scene) -> None:
+    """The scene's frame under every variant is the first one's."""
+    frames = []
+    for defines in VARIANTS:
+        backend.extra_defines = dict(defines)
+        frames.append(render(backend, scene, SIZE))
+    backend.extra_defines = {}
+    for other in frames[1:]:
+        same_frames(frames[0], other)
 
 
 @pytest.mark.parametrize(("backend_name", "precision"), TREES_AND_LOOPS)
@@ -52,13 +81,7 @@ def test_instance_tiles_give_the_trees_frames(backend_factory, backend_name, pre
                 scene.add_light("sun", look_at=(0.3, -1.0, -0.2), shadows=True)
             for position, look_at in cameras:
                 scene.set_camera(position, look_at=look_at, fov_deg=float(rng.uniform(40.0, 100.0)))
-                frames = []
-                for defines in VARIANTS:
-                    backend.extra_defines = dict(defines)
-                    frames.append(render(backend, scene, SIZE))
-                for other in frames[1:]:
-                    same_frames(frames[0], other)
-                backend.extra_defines = {}
+                frames_agree(backend, scene)
                 used.append(instance_tiles_used(backend, scene))
         assert used[0] and not used[1] and sum(used) >= 8
     finally:
@@ -77,5 +100,24 @@ def test_few_instances_keep_the_tree(backend_factory, backend_name, precision):
         scene.add_mesh("most", "box", position=(1.0, 1.0, 0.0))
         render(backend, scene, SIZE)
         assert instance_tiles_used(backend, scene)
+    finally:
+        scene.close()
+
+
+@pytest.mark.parametrize(("backend_name", "precision"), TREES_AND_LOOPS)
+def test_the_lists_alone_give_the_trees_frames(backend_factory, backend_name, precision):
+    """A Euclidean frame without shadows: every search takes its tile's list, the tree compiled out."""
+    backend = backend_factory(backend_name, precision)
+    rng = np.random.default_rng(9)
+    scene = many_instances(6, 150)
+    lo, hi = np.array([-10.0, 0.2, -10.0]), np.array([10.0, 5.0, 10.0])
+    try:
+        for _ in range(4):
+            scene.set_camera(tuple(rng.uniform(lo, hi)), look_at=tuple(rng.uniform(lo, hi)), fov_deg=70.0)
+            frames_agree(backend, scene)
+            assert lists_alone(backend, scene)
+        scene.add_light("sun", look_at=(0.3, -1.0, -0.2), shadows=True)
+        frames_agree(backend, scene)
+        assert instance_tiles_used(backend, scene) and not lists_alone(backend, scene)
     finally:
         scene.close()
