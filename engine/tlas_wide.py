@@ -88,17 +88,30 @@ class TlasLanes(NamedTuple):
 
     @classmethod
     def of(cls, nodes: np.ndarray) -> TlasLanes:
-        """The lanes of a ``tlas_nodes`` table (a binary node's lanes are its two children's boxes)."""
+        """The lanes of a ``tlas_nodes`` table. A binary node's lanes are its grandchildren's boxes (a leaf child's
+        own): a walk takes two levels a step, as a 4-wide tree's."""
         width = bvh_width(nodes)
         if width == 2:
+            n = len(nodes)
             first, count = nodes["first"].astype(np.int64), nodes["count"].astype(np.int64)
-            kids = np.where(count == 0, first, 0)[:, None] + np.arange(2)  # (n, 2)
-            kids = np.minimum(kids, len(nodes) - 1)
-            lane_count = np.where(count[:, None] == 0, np.minimum(count[kids], 1), -1)
-            child = np.where(lane_count == 1, first[kids], kids)
-            lo = nodes["bounds_min"][kids, :3].reshape(-1, 3)
-            hi = nodes["bounds_max"][kids, :3].reshape(-1, 3)
-            return cls(2, lo.astype(np.float64), hi.astype(np.float64), child.ravel(), lane_count.ravel())
+            interior = (count == 0) & (first + 1 < n)
+            kids = np.where(interior, first, 0)[:, None] + np.arange(2)  # (n, 2)
+            kids = np.minimum(kids, n - 1)
+            kid_leaf = (count[kids] > 0) | ~interior[kids]
+            grand = np.where(
+                kid_leaf[..., None],
+                np.stack([kids, np.full_like(kids, -1)], axis=-1),
+                np.stack([first[kids], first[kids] + 1], axis=-1),
+            ).reshape(n, 4)
+            valid = interior[:, None] & (grand >= 0) & (grand < n)
+            if count[0] > 0:  # a root leaf: its own lane
+                valid[0], grand[0] = (True, False, False, False), 0
+            lane = np.where(valid, grand, 0)
+            kind = np.where(valid, np.where(count[lane] > 0, 1, 0), -1)
+            child = np.where(kind == 1, first[lane], lane)
+            lo = nodes["bounds_min"][lane.ravel(), :3].astype(np.float64)
+            hi = nodes["bounds_max"][lane.ravel(), :3].astype(np.float64)
+            return cls(4, lo, hi, child.ravel(), kind.ravel())
         lo = np.stack([nodes[f"lo_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
         hi = np.stack([nodes[f"hi_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
         return cls(
