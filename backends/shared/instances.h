@@ -54,8 +54,8 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 /* nearest_mesh over the count rows of the view tiles' table from first (engine/view_tiles.py): a camera ray's
  * first leg, whose tile's list holds every instance its rays can enter, nearest first with a lower bound of
  * its hits' t; each is culled by its exact bounds as in the tree's walk. Equal t across instances goes to the
- * lower row (test_triangle), so the list's order is unseen. Its own loop, apart from the tree's walk:
- * the list taken into the binary walk's loop as leaves made GLSL's lists slower than this copy does. */
+ * lower row (test_triangle), so the list's order is unseen. A loop of its own, apart from the tree's walk:
+ * on llvmpipe a list run inside the binary walk's loop, as its leaves, is slower than this second copy. */
 FORCE_INLINE MeshHit tile_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max, int first, int count STOP_DECL)
 {
     MeshHit best;
@@ -149,7 +149,6 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     int sp = 0;
     TlasNode node = TLAS_NODE(0);
     bool more = slab_hit(slab(o, inv, TO_REAL3(node.lo.xyz), TO_REAL3(node.hi.xyz)), t_min, best.t);
-
     /* While-while, as trace_instance: descend to a leaf, then trace its instance outside the descent
      * loop, so SIMD lanes (llvmpipe) run the large instance code once per leaf, not per node. */
     while (more) {
