@@ -18,6 +18,7 @@ from engine.layout import Precision
 from engine.maths import quat_to_matrix
 from engine.scene import Scene
 from engine.tlas import rows_at
+from engine.tlas_wide import TlasLanes
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,27 @@ def seen_leaves(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.n
         first = nodes["first"][frontier[~leaf]].astype(np.int64)
         frontier = np.concatenate([first, first + 1])
     return np.concatenate(leaves) if leaves else np.zeros(0, np.int64)
+
+
+def seen_instances(view: CameraView, aspect: float, origin: np.ndarray, lanes: TlasLanes) -> np.ndarray:
+    """The instance rows of the leaves of the top-level tree (``tlas_nodes`` as lanes, binary or wide) whose
+    boxes meet the pyramid of the corner rays, as :func:`seen_leaves`: a walk level by level through the nodes
+    seen. A primary ray can meet only these instances."""
+    apex = np.asarray(view.position, dtype=np.float64) - origin
+    planes = view_planes(view, aspect)
+    frontier = np.array([0], np.int64)
+    rows = []
+    lane = np.arange(lanes.width)
+    for _ in range(len(lanes.kind)):
+        if not frontier.size:
+            break
+        live = (frontier[:, None] * lanes.width + lane).ravel()
+        live = live[lanes.kind[live] >= 0]
+        live = live[_boxes_seen(planes, apex, lanes.lo[live], lanes.hi[live])]
+        kind, child = lanes.kind[live], lanes.child[live]
+        rows.append(child[kind == 1])
+        frontier = child[kind == 0]
+    return np.concatenate(rows) if rows else np.zeros(0, np.int64)
 
 
 def view_reaches(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.ndarray, root: int) -> bool:

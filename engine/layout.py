@@ -325,11 +325,12 @@ CAMERA = Record(
 )
 
 
-#: The per-frame view tiles (:mod:`engine.view_tiles`): the portal rows the first leg of a primary ray through
-#: each screen tile may meet, as CSR. Rows ``[0, tiles)``, one per tile in row-major order (tile row 0 at the
-#: image's top): ``entry = (first entry, count, 0, 0)``; each row after them holds a portal row in ``entry.x``
-#: and its leaf's distance from the camera (float32 bits, a lower bound of any hit's t) in ``entry.y``, each
-#: tile's nearest first.
+#: The per-frame view tiles (:mod:`engine.view_tiles`): the portal rows and the instance rows the first leg of a
+#: primary ray through each screen tile may meet, as CSR. Rows ``[0, tiles)``, one per tile in row-major order
+#: (tile row 0 at the image's top): ``entry = (first portal entry, count, first instance entry, count)``; each
+#: row after them holds a portal or instance row in ``entry.x`` and its box's distance from the camera
+#: (float32 bits, a lower bound of any hit's t) in ``entry.y``, each tile's nearest first; the portals' rows
+#: come first.
 VIEW_TILE = Record("ViewTile", (Field("entry", "int4"),))
 VIEW_TILE_DTYPE = VIEW_TILE.dtype()
 

@@ -12,11 +12,12 @@ third of the binary path.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from engine.bvh_wide import collapse_slots, wide_nodes
-from engine.layout import BVH_WIDTHS
+from engine.layout import BVH_WIDTHS, bvh_width
 from engine.tlas import AabbTree
 
 #: The top-level tree's widths: binary (the :class:`engine.tlas.AabbTree`'s own table), 4- or 8-wide.
@@ -71,3 +72,48 @@ class WideTlas:
                 self.nodes[f"hi_{name}"][row].reshape(-1)[k] = tree.nodes["bounds_max"][node, axis]
             rows.add(row)
         return sorted(rows)
+
+
+class TlasLanes(NamedTuple):
+    """A ``tlas_nodes`` table (binary or wide) as rows of ``width`` lanes, each a child's box, for walks on
+    the host (:func:`engine.camera_view.seen_instances`): lane ``row * width + k`` of ``lo``/``hi`` (float64),
+    ``kind`` 1 a leaf over instance row ``child``, 0 an interior child (row ``child``), -1 none. Row 0 is the
+    root's."""
+
+    width: int
+    lo: np.ndarray
+    hi: np.ndarray
+    child: np.ndarray
+    kind: np.ndarray
+
+    @classmethod
+    def of(cls, nodes: np.ndarray) -> TlasLanes:
+        """The lanes of a ``tlas_nodes`` table. A binary node's lanes are its grandchildren's boxes (a leaf child's
+        own): a walk takes two levels a step, as a 4-wide tree's."""
+        width = bvh_width(nodes)
+        if width == 2:
+            n = len(nodes)
+            first, count = nodes["first"].astype(np.int64), nodes["count"].astype(np.int64)
+            interior = (count == 0) & (first + 1 < n)
+            kids = np.where(interior, first, 0)[:, None] + np.arange(2)  # (n, 2)
+            kids = np.minimum(kids, n - 1)
+            kid_leaf = (count[kids] > 0) | ~interior[kids]
+            grand = np.where(
+                kid_leaf[..., None],
+                np.stack([kids, np.full_like(kids, -1)], axis=-1),
+                np.stack([first[kids], first[kids] + 1], axis=-1),
+            ).reshape(n, 4)
+            valid = interior[:, None] & (grand >= 0) & (grand < n)
+            if count[0] > 0:  # a root leaf: its own lane
+                valid[0], grand[0] = (True, False, False, False), 0
+            lane = np.where(valid, grand, 0)
+            kind = np.where(valid, np.where(count[lane] > 0, 1, 0), -1)
+            child = np.where(kind == 1, first[lane], lane)
+            lo = nodes["bounds_min"][lane.ravel(), :3].astype(np.float64)
+            hi = nodes["bounds_max"][lane.ravel(), :3].astype(np.float64)
+            return cls(4, lo, hi, child.ravel(), kind.ravel())
+        lo = np.stack([nodes[f"lo_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
+        hi = np.stack([nodes[f"hi_{a}"].reshape(-1) for a in "xyz"], axis=1).astype(np.float64)
+        return cls(
+            width, lo, hi, nodes["child"].reshape(-1).astype(np.int64), nodes["count"].reshape(-1).astype(np.int64)
+        )

@@ -1,5 +1,6 @@
-"""Per-frame view tiles: for each screen tile, the portal rows the first leg of its primary rays may meet, so
-the kernels loop over a short list there instead of walking the portals' tree.
+"""Per-frame view tiles: for each screen tile, the portal rows and the instance rows the first leg of its
+primary rays may meet, so the kernels loop over short lists there instead of walking the portals' tree and
+the instances' one.
 
 A primary ray meets a portal only inside that row's leaf of the space tree (grown by the kernels' SPACE_PAD),
 so a tile's list holds every leaf whose box any ray of the tile can enter: the leaves the camera's
@@ -17,7 +18,8 @@ import math
 import numpy as np
 
 from engine import layout
-from engine.camera_view import CameraView, seen_leaves
+from engine.camera_view import CameraView, seen_instances, seen_leaves
+from engine.tlas_wide import TlasLanes
 
 #: log2 of a tile's side in pixels: 8 x 8, the GLSL backend's work-group, whose 4 x 2 lane blocks each lie in
 #: one tile (llvmpipe runs a block's 8 lanes as one vector: one list for them all).
@@ -106,21 +108,64 @@ def _tile_rows(
     return rows[leaf], distance[leaf], np.bincount(tile, minlength=tiles)
 
 
+def _section(
+    view: CameraView,
+    width: int,
+    height: int,
+    origin: np.ndarray,
+    rows: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    log2: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One section of the table: the rows whose boxes lo/hi (float64, camera-relative) a tile's rays may enter,
+    per tile nearest first, with their distances, and the count per tile."""
+    tiles_x, tiles_y = tile_grid(width, height, log2)
+    ranges, distance = leaf_tiles(view, width, height, origin, lo, hi, log2)
+    return _tile_rows(ranges, rows, distance, tiles_x, tiles_x * tiles_y)
+
+
 def view_tiles(
-    view: CameraView, width: int, height: int, origin: np.ndarray, nodes: np.ndarray, root: int, log2: int = TILE_LOG2
+    view: CameraView,
+    width: int,
+    height: int,
+    origin: np.ndarray,
+    portals: tuple[np.ndarray, int] | None = None,
+    instances: tuple[TlasLanes, np.ndarray, np.ndarray] | None = None,
+    log2: int = TILE_LOG2,
+    instance_max: int = 1 << 30,
 ) -> np.ndarray:
-    """The frame's :data:`engine.layout.VIEW_TILE` table: for each tile the portal rows (of the tree in
-    ``nodes`` from ``root``) its primary rays' first legs may meet."""
+    """The frame's :data:`engine.layout.VIEW_TILE` table: for each tile the portal rows (``portals``: the
+    ``space_nodes`` table and the portals' root) and the instance rows (``instances``: the ``tlas_nodes``
+    table's lanes and the instances' exact bounds, camera-relative) its primary rays' first legs may meet; a section
+    not asked for is empty. A tile with more than ``instance_max`` instances lists none, its count -1."""
     tiles_x, tiles_y = tile_grid(width, height, log2)
     tiles = tiles_x * tiles_y
-    leaves = seen_leaves(view, width / height, origin, nodes, root)
-    lo, hi = nodes["bounds_min"][leaves].astype(np.float64), nodes["bounds_max"][leaves].astype(np.float64)
-    ranges, distance = leaf_tiles(view, width, height, origin, lo, hi, log2)
-    rows, near, counts = _tile_rows(ranges, nodes["first"][leaves].astype(np.int64), distance, tiles_x, tiles)
-    table = np.zeros(tiles + len(rows), layout.VIEW_TILE_DTYPE)
+    aspect = width / height
+    empty = (np.zeros(0, np.int64), np.zeros(0), np.zeros(tiles, np.int64))
+    portal_part = instance_part = empty
+    if portals is not None:
+        nodes, root = portals
+        leaves = seen_leaves(view, aspect, origin, nodes, root)
+        lo, hi = nodes["bounds_min"][leaves].astype(np.float64), nodes["bounds_max"][leaves].astype(np.float64)
+        portal_part = _section(view, width, height, origin, nodes["first"][leaves].astype(np.int64), lo, hi, log2)
+    if instances is not None:
+        tlas, lo, hi = instances
+        rows = seen_instances(view, aspect, origin, tlas)
+        rows, near, counts = _section(view, width, height, origin, rows, lo[rows], hi[rows], log2)
+        long = counts > instance_max
+        if long.any():  # those tiles' rays walk the tree (count -1): a long list slabs more boxes than its walk
+            keep = ~np.repeat(long, counts)
+            rows, near, counts = rows[keep], near[keep], np.where(long, -1, counts)
+        instance_part = rows, near, counts
+    table = np.zeros(tiles + len(portal_part[0]) + len(instance_part[0]), layout.VIEW_TILE_DTYPE)
     entry = table["entry"]
-    entry[:tiles, 0] = tiles + np.cumsum(counts) - counts
-    entry[:tiles, 1] = counts
-    entry[tiles:, 0] = rows
-    entry[tiles:, 1] = near.astype(np.float32).view(np.int32)
+    start = tiles
+    for column, (rows, near, counts) in ((0, portal_part), (2, instance_part)):
+        listed = np.maximum(counts, 0)
+        entry[:tiles, column] = start + np.cumsum(listed) - listed
+        entry[:tiles, column + 1] = counts
+        entry[start : start + len(rows), 0] = rows
+        entry[start : start + len(rows), 1] = near.astype(np.float32).view(np.int32)
+        start += len(rows)
     return table

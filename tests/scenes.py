@@ -348,3 +348,18 @@ def random_rows(dtype: np.dtype, n: int, rng: np.random.Generator) -> np.ndarray
         else:
             rows[name] = rng.integers(-1000, 1000, size=field.shape)
     return rows
+
+
+def many_instances(seed: int, n: int) -> Scene:
+    """A floor and n meshes of random shape, place, size and turn, around and across the origin."""
+    rng = np.random.default_rng(seed)
+    scene = Scene(f"many-instances-{seed}")
+    scene.add_mesh("floor", "plane", position=(0.0, 0.0, 0.0), scale=(30.0, 1.0, 30.0))
+    for k in range(n):
+        scene.add_mesh(
+            f"m{k}", ("box", "sphere", "cylinder")[k % 3],
+            position=tuple(rng.uniform([-8.0, 0.0, -8.0], [8.0, 4.0, 8.0])),
+            euler_deg=tuple(rng.uniform(-180.0, 180.0, 3)), scale=tuple(rng.uniform(0.1, 3.0, 3)),
+        )  # fmt: skip
+    scene.set_camera((0.0, 1.8, 12.0), look_at=(0.0, 1.0, 0.0))
+    return scene

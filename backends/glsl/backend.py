@@ -157,6 +157,8 @@ class GlslBackend(shared.UploadedScene, Backend):
         self._forget_upload()
         #: Whether frames may take view tiles: their image unit exists with the image store only.
         self.view_tiles = self.table_store == "image"
+        #: ... and the instances' lists among them (README.md's table: llvmpipe gains where PoCL does not).
+        self.instance_tiles = self.view_tiles
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -368,11 +370,11 @@ class GlslBackend(shared.UploadedScene, Backend):
             features = self._frame_features(camera, width, height)
             defines = self._defines(aovs, features)
             tiles = self._frame_view_tiles(camera, width, height, features, row)
-            defines.update(self._frame_space_defines(features, row, self.precision), **shared.view_tile_defines(tiles))
-            defines.update(self.extra_defines)
+            defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
+            defines.update(shared.view_tile_defines(tiles))
             program = self._program(defines)
             if tiles is not None:
-                self._device.bind_view_tiles(tiles)
+                self._device.bind_view_tiles(tiles.table)
             self._device.bind(row)
             for name in aovs:
                 if name in OUTPUT_BINDINGS:

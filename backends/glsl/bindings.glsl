@@ -124,7 +124,7 @@ layout(std430, binding = CAMERA_BINDING) readonly restrict buffer CameraTable { 
 
 /* The per-frame view tiles (engine/view_tiles.py), in an image under either store: with storage buffers the
  * 16 storage blocks are taken (see below); the backend asks for them only with images. */
-#if VIEW_TILES
+#if VIEW_TILES || INSTANCE_TILES
 layout(rgba32ui, binding = VIEW_TILES_IMAGE) readonly restrict uniform uimage2D view_tiles_img;
 #if TABLES_IN_IMAGES
 #define VIEW_TILE(i) (ViewTile_from_texels(view_tiles_img, (i)))

@@ -358,20 +358,19 @@ class OpenClBackend(shared.UploadedScene, Backend):
         features = self._frame_features(camera, width, height)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
         defines = self._defines(features)
-        defines.update(
-            self._frame_space_defines(features, self._camera_row, self.precision),
-            **shared.view_tile_defines(tiles),
-            **self.extra_defines,
-        )
+        defines.update(self._frame_space_defines(features, self._camera_row, self.precision))
+        defines.update(self.extra_defines)
+        defines.update(shared.view_tile_defines(tiles))
         kernel = self._kernel(defines)
         self._ensure_outputs(width, height, aovs)
         self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         if tiles is not None:
-            if self._view_tiles.size < tiles.nbytes:
+            table = tiles.table
+            if self._view_tiles.size < table.nbytes:
                 self._view_tiles.release()
-                self._view_tiles = self._cl.Buffer(self._context(), self._cl.mem_flags.READ_ONLY, 2 * tiles.nbytes)
-            self._view_tile_rows = tiles
-            self._cl.enqueue_copy(queue, self._view_tiles, tiles, is_blocking=False)
+                self._view_tiles = self._cl.Buffer(self._context(), self._cl.mem_flags.READ_ONLY, 2 * table.nbytes)
+            self._view_tile_rows = table
+            self._cl.enqueue_copy(queue, self._view_tiles, table, is_blocking=False)
         args: list[cl.Buffer | None] = [self._tables[name] for name in layout.TABLES]
         args += [self._camera, self._view_tiles]
         args += [self._outputs[name] if name in aovs else None for name in AOVS]

@@ -20,7 +20,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from importlib import resources
-from typing import ClassVar
+from typing import ClassVar, NamedTuple
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from engine.box_clearance import instance_bounds
 from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
 from engine.tlas import rows_at
+from engine.tlas_wide import TlasLanes
 from engine.view_tiles import TILE_LOG2, view_tiles
 
 from .layout_h import layout_h
@@ -239,10 +240,14 @@ class UploadedScene:
     #: Whether the kernels walk the space trees' 4-wide forms (SPACE_WIDE), not the binary ones: each
     #: backend's own, from scripts/space_tree_ab.py A/Bs.
     space_wide: ClassVar[bool] = False
-    #: Whether camera rays take their first leg's portals from the frame's view tiles (VIEW_TILES) where that
+    #: Whether camera rays take their first leg's portals (VIEW_TILES) from the frame's view tiles where that
     #: frame allows (interleaved A/B in README.md's table; boxes keep their tree: no gain there).
     view_tiles: bool = True
-    #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` also skips building the tiles).
+    #: ... and their first mesh search's instances (INSTANCE_TILES): each backend's own (README.md's table; on
+    #: PoCL only the hotel's frames gained, the village's and the house's lost), ``INSTANCE_TILES=1`` asks.
+    instance_tiles: bool = False
+    #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
+    #: building that section of the tiles).
     extra_defines: dict[str, int]
 
     def _forget_upload(self) -> None:
@@ -253,6 +258,7 @@ class UploadedScene:
         self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
         self._portal_root: int | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
+        self._tlas_lanes = TlasLanes.of(np.zeros(1, layout.TLAS_NODE_DTYPE))
         self._box_gap = 0.0
         self._reach = 0.0
         self._features = Features()
@@ -284,6 +290,8 @@ class UploadedScene:
         self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
+        # ... and the tree over them, for the instances the camera sees (the view tiles; a copy, likewise).
+        self._tlas_lanes = TlasLanes.of(packed.tables["tlas_nodes"][: max(1, packed.counts.get("tlas_nodes", 0))])
         # ... and what FACE_NEXT_ONLY's proof needs: the boxes' least gap, the largest |p| of what rays meet.
         self._box_gap = float(self._boxes["rotation"][:, 1, 3].min()) if self._boxes.size else 0.0
         corners = [self._bounds[0], self._bounds[1]]
@@ -333,19 +341,69 @@ class UploadedScene:
 
     def _frame_view_tiles(
         self, camera: CameraView, width: int, height: int, features: Features, row: np.ndarray
-    ) -> np.ndarray | None:
-        """The frame's view tiles (engine/view_tiles.py) where its camera rays' first legs can use them: portals
-        found through their tree, and a first leg that starts at the camera in no box (``size.z`` -1, so its
-        direction is the primary ray's); else None, and the tree serves every leg."""
-        if not self.view_tiles or not self.extra_defines.get("VIEW_TILES", 1):
-            return None
-        if not (features.portals and self._space["PORTAL_TREE"] and self._portal_root is not None):
+    ) -> FrameTiles | None:
+        """The frame's view tiles (engine/view_tiles.py) where its camera rays' first legs can use them: a first
+        leg that starts at the camera in no box (``size.z`` -1, so its direction is the primary ray's); portals
+        found through their tree, instances through theirs with at least :data:`INSTANCE_TILE_MIN` of them;
+        else None, and the trees serve every leg."""
+        if not self.view_tiles:
             return None
         if features.aberration_modes and int(row["size"][0, 2]) != -1:
             return None
-        return view_tiles(camera, width, height, self._origin, self._space_nodes, self._portal_root)
+        portals = (
+            self.extra_defines.get("VIEW_TILES", 1)
+            and features.portals
+            and self._space["PORTAL_TREE"]
+            and self._portal_root is not None
+        )
+        instances = (
+            self.extra_defines.get("INSTANCE_TILES", int(self.instance_tiles))
+            and self._bounds is not None
+            and len(self._bounds[0]) >= INSTANCE_TILE_MIN
+        )
+        if not (portals or instances):
+            return None
+        # A Euclidean frame without shadows searches the meshes only on its camera rays' first legs: the lists
+        # serve every search (none too long to list), and the tree's walk is compiled out.
+        only = bool(instances) and not (features.portals or features.aberration_modes or features.shadows)
+        only = only and bool(self.extra_defines.get("INSTANCE_TILES_ONLY", 1))
+        table = view_tiles(
+            camera,
+            width,
+            height,
+            self._origin,
+            portals=(self._space_nodes, self._portal_root) if portals and self._portal_root is not None else None,
+            instances=(self._tlas_lanes, *self._bounds) if instances and self._bounds is not None else None,
+            instance_max=1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
+        )
+        return FrameTiles(table, bool(portals), bool(instances), only)
 
 
-def view_tile_defines(tiles: np.ndarray | None) -> dict[str, int]:
-    """The defines of a frame with view tiles (none without: those frames compile as before)."""
-    return {} if tiles is None else {"VIEW_TILES": 1, "VIEW_TILE_LOG2": TILE_LOG2}
+#: Frames with fewer instances keep the instance tree for every search (a list gains nothing over a short walk).
+INSTANCE_TILE_MIN = 4
+#: A tile listing more instances than this leaves its rays to the tree (a ray slabs every listed box it passes
+#: before its hit, a walk only the nodes it enters).
+INSTANCE_TILE_MAX = 16
+
+
+class FrameTiles(NamedTuple):
+    """A frame's view tiles: the table and which of its sections the kernels read (an empty one is not)."""
+
+    table: np.ndarray
+    portals: bool
+    instances: bool
+    #: Whether the instances' lists serve every mesh search of the frame (INSTANCE_TILES_ONLY).
+    instances_only: bool = False
+
+
+def view_tile_defines(tiles: FrameTiles | None) -> dict[str, int]:
+    """The defines of a frame's view tiles, after the backend's extra defines (which ask for the tiles: the
+    frame decides whether its kernel reads them)."""
+    if tiles is None:
+        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0, "INSTANCE_TILES_ONLY": 0}
+    return {
+        "VIEW_TILES": int(tiles.portals),
+        "INSTANCE_TILES": int(tiles.instances),
+        "INSTANCE_TILES_ONLY": int(tiles.instances_only),
+        "VIEW_TILE_LOG2": TILE_LOG2,
+    }

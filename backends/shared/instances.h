@@ -47,13 +47,51 @@ FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, r
 #define TLAS_PUSH(L) WIDE_PUSH(L, TLAS_STACK_SIZE, TLAS_LANE_HIT(L))
 #endif
 
+#if INSTANCE_TILES
+/* A camera ray's first leg names its tile's list of instances (first, count); count -1: the tree. */
+#define TILE_LIST_DECL , int list_first, int list_count
+#define TILE_LIST_ARG(first, count) , first, count
+/* nearest_mesh over the count rows of the view tiles' table from first (engine/view_tiles.py): a camera ray's
+ * first leg, whose tile's list holds every instance its rays can enter, nearest first with a lower bound of
+ * its hits' t; each is culled by its exact bounds as in the tree's walk. Equal t across instances goes to the
+ * lower row (test_triangle), so the list's order is unseen. A loop of its own, apart from the tree's walk:
+ * on llvmpipe a list run inside the binary walk's loop, as its leaves, is slower than this second copy. */
+FORCE_INLINE MeshHit tile_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max, int first, int count STOP_DECL)
+{
+    MeshHit best;
+    best.t = t_max;
+    best.bary = R3S(0.0f);
+    best.instance = -1;
+    best.triangle = -1;
+    real3 inv = safe_inverse(d);
+    for (int k = first; k < first + count; ++k) {
+        int4 e = VIEW_TILE(k).entry;
+        /* Nearest first: an instance farther than the best hit holds no nearer one (nor a tie). */
+        if (TO_REAL(AS_FLOAT(e.y)) > best.t) {
+            break;
+        }
+        real2 h = slab(o, inv, INSTANCE(e.x).bounds_min.xyz, INSTANCE(e.x).bounds_max.xyz);
+        if (slab_hit(h, t_min, best.t)) {
+            best = trace_instance(SCENE_PASS best, e.x, o, d, t_min STOP_PASS);
+        }
+#if HAS_SHADOWS
+        k = best.t < t_stop ? first + count : k;
+#endif
+    }
+    return best;
+}
+#else
+#define TILE_LIST_DECL
+#define TILE_LIST_ARG(first, count)
+#endif
+
 /* The nearest triangle hit with t_min < t <= t_max over every instance, or with shadows the first one
  * found nearer than t_stop (core.h, SEARCH_STOP). USE_TLAS: the instances
  * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py; TLAS_WIDTH 4 or 8: its
  * wide nodes, engine/tlas_wide.py), nearest child first; each leaf's instance is then culled by its exact world bounds (the leaf's are fattened, so a
  * small move changes only the instance row). Else: every instance's world bounds in turn. Equal t
  * across instances goes to the lower row either way (test_triangle), so the order is unseen. */
-FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max STOP_DECL)
+FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_max STOP_DECL TILE_LIST_DECL)
 {
     MeshHit best;
     best.t = t_max;
@@ -65,6 +103,15 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         return best; /* a zero or NaN direction hits nothing */
     }
     real3 inv = safe_inverse(d);
+#if INSTANCE_TILES_ONLY
+    /* Every search of the frame is a camera ray's first leg, with its list (the host's INSTANCE_TILES_ONLY). */
+    best = tile_mesh(SCENE_PASS o, d, t_min, t_max, list_first, list_count STOP_PASS);
+#else
+#if INSTANCE_TILES
+    if (list_count >= 0) {
+        return tile_mesh(SCENE_PASS o, d, t_min, t_max, list_first, list_count STOP_PASS);
+    }
+#endif
 #if USE_TLAS && TLAS_WIDTH >= 4
     /* As an asset's wide tree (bvh_wide.h): a visit slabs every lane at once, pushes those entered
      * nearest-on-top and pops the nearest; a popped lane of kind (its count) 1 is instance row first. */
@@ -131,6 +178,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         i = best.t < t_stop ? count : i;
 #endif
     }
+#endif
 #endif
     return best;
 }

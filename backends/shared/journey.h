@@ -3,9 +3,10 @@
 
 /* --- the journey (docs/semantics.md sections 3-13) ----------------------------------------------- */
 
-#if VIEW_TILES
-/* Whether a leg is a camera ray's first and the view tile it lies in (engine/view_tiles.py): its portals come
- * from the tile's list, not the tree; constant false for the other legs and shadow rays. */
+#if VIEW_TILES || INSTANCE_TILES
+/* Whether a ray is a camera ray and the view tile it lies in (engine/view_tiles.py): its first leg's portals
+ * (VIEW_TILES) and instances (INSTANCE_TILES) come from the tile's lists, not the trees; constant false for
+ * the other legs and shadow rays. */
 #define TILED_DECL , bool tiled, int tile
 #define TILED_ARG(tiled, tile) , tiled, tile
 #else
@@ -250,6 +251,16 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
     hit.instance = -1;
     hit.triangle = -1;
     int max_events = max(1, min(SETTINGS.counts.w, MAX_EVENTS));
+#if INSTANCE_TILES
+    /* The tile's list of instances, for the first leg's mesh search; count -1: too many listed, the tree's. */
+    int tile_first = 0;
+    int tile_count = -1;
+    if (tiled) {
+        int4 list = VIEW_TILE(tile).entry;
+        tile_first = list.z;
+        tile_count = list.w;
+    }
+#endif
 #if HAS_SPACE
     /* Each leg's events, found once: here for the first leg, after each crossing for the next. */
     LegEvents ev = first_leg_events(SCENE_PASS ray, clear TILED_ARG(tiled, tile));
@@ -340,7 +351,9 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         mesh.instance = -1;
         mesh.triangle = -1;
         if (search) {
-            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS);
+            /* A camera ray's first leg (no event crossed yet) takes the tile's instances, nearest first. */
+            mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS
+                                    TILE_LIST_ARG(tile_first, tiled && ray.n == 0 ? tile_count : -1));
         }
 #if HAS_SPACE
         kind = leg_event_kind(ev, mesh, ray.o_len);

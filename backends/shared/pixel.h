@@ -25,7 +25,7 @@ Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
     }
 #endif
 #endif
-#if VIEW_TILES
+#if VIEW_TILES || INSTANCE_TILES
     /* The view tile of the pixel (engine/view_tiles.py): its lists serve the first leg. */
     int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
     int tile = (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);

@@ -225,7 +225,8 @@ def test_view_tiles_give_the_trees_frames(backend_factory, backend_name, precisi
                 view, backend._origin, precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
             )
             features = backend._frame_features(view, *SIZE)
-            tiled.append(backend._frame_view_tiles(view, *SIZE, features, row) is not None)
+            tiles = backend._frame_view_tiles(view, *SIZE, features, row)
+            tiled.append(tiles is not None and tiles.portals)
         assert tiled[0] and not tiled[1] and sum(tiled) >= 3
     finally:
         backend.extra_defines = {}

@@ -1,6 +1,7 @@
-"""The view tiles (engine/view_tiles.py): every portal a primary ray's first leg passes through is in the list
-of that ray's tile, no nearer than the distance stored beside it, for random scenes and cameras (in front of
-many portals, near and inside their leaves, leaves across the camera plane, any subpixel point)."""
+"""The view tiles (engine/view_tiles.py): every portal a primary ray's first leg passes through, and every
+instance whose bounds it enters, is in the list of that ray's tile, no nearer than the distance stored beside
+it, for random scenes and cameras (in front of many portals or instances, near and inside their leaves or
+bounds, boxes across the camera plane, any subpixel point)."""
 
 from __future__ import annotations
 
@@ -8,12 +9,14 @@ import math
 
 import numpy as np
 import pytest
-from scenes import crowded
+from scenes import crowded, many_instances
 
 from backends.reference.directions import affine_points, linear_vectors
+from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, seen_leaves, view_reaches
 from engine.maths import quat_to_matrix
 from engine.packing import ScenePacker
+from engine.tlas_wide import TlasLanes
 from engine.view_tiles import tile_grid, view_tiles
 
 
@@ -49,7 +52,7 @@ def check_tiles(view: CameraView, width: int, height: int, origin: np.ndarray, p
     """Asserts that every first-leg hit of the frame is in its tile's list; returns how many hits there were."""
     nodes, root = packed.tables["space_nodes"], int(packed.tables["settings"]["space_roots"][0][0])
     portals = packed.tables["portals"][: packed.counts["portals"]]
-    table = view_tiles(view, width, height, origin, nodes, root)
+    table = view_tiles(view, width, height, origin, portals=(nodes, root))
     entry = table["entry"]
     (pixels, rows), t = first_leg_hits(view, width, height, origin, portals)
     tiles_x, _ = tile_grid(width, height)
@@ -110,9 +113,81 @@ def test_a_leaf_across_the_camera_plane_covers_every_tile() -> None:
     leaf = int(np.flatnonzero(nodes["count"] == 1)[0])
     lo, hi = nodes["bounds_min"][leaf].astype(np.float64), nodes["bounds_max"][leaf].astype(np.float64)
     view = CameraView(origin + 0.5 * (lo + hi), np.eye(3), 60.0)
-    table = view_tiles(view, 40, 30, origin, nodes, root)
+    table = view_tiles(view, 40, 30, origin, portals=(nodes, root))
     tiles = math.prod(tile_grid(40, 30))
     entry = table["entry"]
     for k in range(tiles):
         first, count = entry[k, 0], entry[k, 1]
         assert int(nodes["first"][leaf]) in entry[first : first + count, 0]
+
+
+def check_instance_tiles(view: CameraView, width: int, height: int, packed) -> int:
+    """Asserts that every instance whose exact bounds a primary ray enters (t > 0, the kernels' cull before
+    any triangle) is in its tile's list, no nearer than the distance stored beside it; returns how many."""
+    origin = np.asarray(packed.origin, dtype=np.float64)
+    lo, hi = instance_bounds(packed)
+    table = view_tiles(view, width, height, origin, instances=(TlasLanes.of(packed.tables["tlas_nodes"]), lo, hi))
+    entry = table["entry"]
+    o = view.position - origin
+    r = view.primary_directions(width, height).reshape(-1, 3)
+    with np.errstate(all="ignore"):
+        t0, t1 = (lo[:, None] - o) / r[None], (hi[:, None] - o) / r[None]  # (instances, pixels, 3)
+        enter = np.nanmax(np.minimum(t0, t1), axis=2)
+        leave = np.nanmin(np.maximum(t0, t1), axis=2)
+    rows, pixels = np.nonzero((leave >= np.maximum(enter, 0.0)) & (leave > 0.0))
+    tiles_x, _ = tile_grid(width, height)
+    tile = (pixels // width >> 3) * tiles_x + (pixels % width >> 3)
+    for row, p, tile_k in zip(rows, pixels, tile, strict=True):
+        first, count = entry[tile_k, 2], entry[tile_k, 3]
+        listed = entry[first : first + count]
+        where = np.flatnonzero(listed[:, 0] == row)
+        assert where.size == 1, f"pixel {p}: instance {row} missing from tile {tile_k}"
+        near = listed[where[0], 1:2].view(np.float32)[0]
+        assert near <= max(enter[row, p], 0.0), (
+            f"pixel {p}: instance {row} entered at {enter[row, p]}, listed at {near}"
+        )
+        assert np.all(np.diff(listed[:, 1].view(np.float32)) >= 0.0)  # nearest first
+    return len(rows)
+
+
+@pytest.mark.parametrize(("seed", "width"), [(0, 2), (1, 2), (2, 4), (3, 8), (4, 8)])
+def test_every_instance_a_primary_ray_enters_is_in_its_tiles_list(seed: int, width: int) -> None:
+    """Random scenes of many instances (binary, 4- and 8-wide trees), cameras among them and inside their
+    bounds (boxes across the camera plane), any field of view and subpixel point."""
+    rng = np.random.default_rng(100 + seed)
+    packer = ScenePacker("f32", tlas_width=width)
+    packer.sync(many_instances(seed, 120))
+    packed = packer.packed
+    lo, hi = instance_bounds(packed)
+    origin = np.asarray(packed.origin, dtype=np.float64)
+    hits = 0
+    for k in range(6):
+        size = (int(rng.integers(17, 70)), int(rng.integers(17, 70)))
+        if k % 2:  # inside or beside an instance's bounds
+            row = int(rng.integers(len(lo)))
+            position = origin + lo[row] + rng.uniform(-0.2, 1.2, 3) * (hi[row] - lo[row])
+        else:
+            position = rng.uniform([-10.0, 0.2, -10.0], [10.0, 5.0, 10.0])
+        view = CameraView(position, random_rotation(rng), float(rng.uniform(20.0, 120.0)), tuple(rng.uniform(0, 1, 2)))
+        hits += check_instance_tiles(view, *size, packed)
+    assert hits > 0
+
+
+def test_a_tile_with_too_many_instances_lists_none() -> None:
+    """Past ``instance_max`` a tile's count is -1 (its rays walk the tree) and its rows are not stored."""
+    packer = ScenePacker("f32", tlas_width=8)
+    packer.sync(many_instances(7, 200))
+    packed = packer.packed
+    lo, hi = instance_bounds(packed)
+    view = CameraView(np.array([0.0, 2.0, 20.0]), np.eye(3), 60.0)
+    lanes = TlasLanes.of(packed.tables["tlas_nodes"])
+    full = view_tiles(view, 64, 48, packed.origin, instances=(lanes, lo, hi))["entry"]
+    capped = view_tiles(view, 64, 48, packed.origin, instances=(lanes, lo, hi), instance_max=8)["entry"]
+    tiles = math.prod(tile_grid(64, 48))
+    long = full[:tiles, 3] > 8
+    assert long.any() and not long.all()
+    assert np.array_equal(capped[:tiles, 3], np.where(long, -1, full[:tiles, 3]))
+    assert len(capped) == tiles + int(full[:tiles, 3][~long].sum())
+    for k in np.flatnonzero(~long):
+        a, b = full[k, 2], capped[k, 2]
+        assert np.array_equal(full[a : a + full[k, 3]], capped[b : b + capped[k, 3]])
