@@ -29,6 +29,8 @@ class Features:
     #: Some instance samples a texture / shades with vertex normals: without, their code compiles out.
     textures: bool = False
     smooth: bool = False
+    #: Some material has a checker (cell > 0): without, the checker's code compiles out.
+    checker: bool = False
 
     def defines(self) -> dict[str, int]:
         return {
@@ -42,6 +44,7 @@ class Features:
             "MAX_EVENTS": self.max_events,
             "HAS_TEXTURES": int(self.textures),
             "HAS_SMOOTH": int(self.smooth),
+            "HAS_CHECKER": int(self.checker),
         }
 
 

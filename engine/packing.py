@@ -189,6 +189,7 @@ class ScenePacker:
         for row in sorted(material_rows):
             self._pack_material_row(scene, row)
             updates.append(TableUpdate("materials", range(row, row + 1)))
+        components |= bool(material_rows)  # a checker added or removed changes the features
         if portals or boxes or instance_rows:
             space = self.space.update(scene, packed, portals, boxes, self._instance_bounds(), sorted(instance_rows))
             if space is None:  # a box's priority moved its row: the space tables anew
@@ -353,9 +354,11 @@ class ScenePacker:
     def _update_features_and_counts(self, scene: Scene) -> None:
         assert self.packed is not None
         lights = self.packed.counts.get("lights", 0) > 0
+        cells = self.packed.tables["materials"]["color"][: self.packed.counts["materials"], 3]
         self.packed.features = replace(
             self.packed.features, portals=self.space.linked, aberration_modes=self.space.modes,
             max_events=scene.settings.max_events, lights=lights, shadows=lights and shadowing(scene),
+            checker=bool(np.any(cells > 0)),
         )  # fmt: skip
         self._pack_settings(scene)
 

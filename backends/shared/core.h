@@ -41,6 +41,7 @@
  *   HAS_ABERRATIONS    aberration boxes exist: box faces, active box, transitions
  *   HAS_TEXTURES       some material samples the texel atlas (TEXEL(i))
  *   HAS_SMOOTH         some instance shades with vertex normals (TRIANGLE_NORMAL(i))
+ *   HAS_CHECKER        some material has a checker (cell > 0); 1 where not given
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
  *   HAS_LIGHTS         Light entities exist (the lights table), else the implicit sun along light_dir
  *   HAS_SHADOWS        a light casts shadows: shadow rays take the journey (journey.h, shadow_lit)
@@ -110,6 +111,9 @@
 #endif
 #ifndef HAS_SMOOTH
 #define HAS_SMOOTH 0
+#endif
+#ifndef HAS_CHECKER
+#define HAS_CHECKER 1
 #endif
 #ifndef REAL_IS_DOUBLE
 #define REAL_IS_DOUBLE 0

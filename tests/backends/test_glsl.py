@@ -17,6 +17,8 @@ from backends.base import AOVS
 from backends.glsl.backend import GlslBackend, lane_block
 from backends.glsl.tables import CAMERA_IMAGE, new_image, write_texels
 from backends.shared import bvh_depth, stack_size
+from backends.upload import SceneUploader
+from components import Mesh
 from engine import layout
 from engine.camera_view import scene_camera
 from engine.scene import Scene
@@ -213,6 +215,23 @@ def test_a_variant_is_compiled_once_and_reused(fresh_glsl):
     fresh_glsl.render(camera, 32, 24, aovs=("instance",))
     fresh_glsl.render(camera, 32, 24, aovs=("color", "depth"))
     assert fresh_glsl.compile_count == 2
+
+
+def test_a_checker_added_by_an_edit_is_drawn_as_in_a_fresh_upload(fresh_glsl):
+    """Without a checker the kernel compiles its code out; a mesh edit that adds one brings it back."""
+    scene = boxes_scene()
+    floor = scene.entity("floor")
+    scene.set(floor, Mesh("plane"))
+    uploader = SceneUploader(fresh_glsl)
+    uploader.sync(scene)
+    camera = scene_camera(scene)
+    plain = fresh_glsl.render(camera, 48, 36, ("color",)).color
+    scene.set(floor, Mesh("plane", checker=0.5))
+    uploader.sync(scene)
+    edited = fresh_glsl.render(camera, 48, 36, ("color",)).color
+    assert fresh_glsl.compile_count == 2 and not np.array_equal(edited, plain)
+    fresh = render(fresh_glsl, boxes_scene(), aovs=("color",)).color
+    assert np.array_equal(edited, fresh)
 
 
 # --- uploads -----------------------------------------------------------------------------------------

@@ -307,3 +307,20 @@ def test_compact_bvh_packing_links_every_asset():
         ScenePacker(bvh_width=4, bvh_compact=True)
     assert GlslBackend.bvh_compact and GlslBackend.bvh_width == 2
     assert not OpenClBackend.bvh_compact and not ReferenceBackend.bvh_compact
+
+
+def test_the_checker_feature_follows_the_materials() -> None:
+    """No material with a checker compiles its code out; a mesh edit that adds or removes one changes the
+    features (a new kernel variant), and the settings row goes up with them."""
+    scene = small_scene()
+    packer = ScenePacker("f32")
+    packer.sync(scene)
+    assert packer.packed is not None and packer.packed.features.checker
+    assert packer.packed.features.defines()["HAS_CHECKER"] == 1
+    floor = scene.entity("floor")
+    scene.set(floor, Mesh("plane"))
+    assert "settings" in {u.table for u in packer.sync(scene)}
+    assert not packer.packed.features.checker and packer.packed.features.defines()["HAS_CHECKER"] == 0
+    scene.set(floor, Mesh("plane", checker=0.25))
+    assert "settings" in {u.table for u in packer.sync(scene)}
+    assert packer.packed.features.checker
