@@ -356,8 +356,14 @@ class UploadedScene:
             and self._space["PORTAL_TREE"]
             and self._portal_root is not None
         )
+        # Beside portals or boxes the lists are a second copy of the instance code (later legs keep the tree),
+        # which llvmpipe runs for every lane; by default it is used only where most first legs search the
+        # meshes: with the portal tree's many doors (most first legs end on walls), not where a box or a few
+        # portals fill the view and the clearances prove their first legs free (ten-boxes-aberration and
+        # -portals on GLSL: 1.19x the time with the lists). INSTANCE_TILES in the extra defines decides alone.
+        wanted = self.instance_tiles and not (features.aberration_modes or (features.portals and not portals))
         instances = (
-            self.extra_defines.get("INSTANCE_TILES", int(self.instance_tiles))
+            self.extra_defines.get("INSTANCE_TILES", int(wanted))
             and self._bounds is not None
             and len(self._bounds[0]) >= INSTANCE_TILE_MIN
         )

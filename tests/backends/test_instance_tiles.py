@@ -121,3 +121,40 @@ def test_the_lists_alone_give_the_trees_frames(backend_factory, backend_name, pr
         assert instance_tiles_used(backend, scene) and not lists_alone(backend, scene)
     finally:
         scene.close()
+
+
+def default_tiles_used(backend, scene) -> bool:
+    """Whether the backend's frame reads the instances' lists as it chooses, asked nothing."""
+    backend.extra_defines = {}
+    view = scene_camera(scene)
+    row = pack_camera(
+        view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
+    )
+    tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
+    return tiles is not None and tiles.instances
+
+
+def test_glsl_lists_stay_off_beside_a_box_or_looped_portals(backend_factory):
+    """By default GLSL lists instances in Euclidean frames and beside the portal tree only: beside boxes or a
+    few (looped) portals the lists' second copy of the instance code costs every llvmpipe lane."""
+    backend = backend_factory("glsl", "f32")
+    scene = many_instances(3, 40)
+    scene.set_camera((0.0, 1.8, 12.0), look_at=(0.0, 1.0, 0.0))
+    try:
+        render(backend, scene, SIZE)
+        assert default_tiles_used(backend, scene)
+        scene.add_portal_pair("pa", "pb", a=dict(position=(-3.0, 1.5, 4.0)), b=dict(position=(40.0, 1.5, 4.0)))
+        render(backend, scene, SIZE)
+        assert not backend._space["PORTAL_TREE"] and not default_tiles_used(backend, scene)
+        for k in range(12):  # enough portals for their tree
+            scene.add_portal_pair(f"qa{k}", f"qb{k}", a=dict(position=(k - 6.0, 1.5, 2.0), scale=(0.3, 0.3, 1.0)),
+                                  b=dict(position=(k - 6.0, 1.5, 60.0), scale=(0.3, 0.3, 1.0)))  # fmt: skip
+        render(backend, scene, SIZE)
+        assert backend._space["PORTAL_TREE"] and default_tiles_used(backend, scene)
+        scene.add_aberration("box", (0.2, 0.0, 0.0), position=(30.0, 1.0, 30.0), scale=(4.0, 4.0, 4.0))
+        render(backend, scene, SIZE)
+        assert not default_tiles_used(backend, scene)
+        assert instance_tiles_used(backend, scene)  # asked for, they serve beside the box too
+    finally:
+        backend.extra_defines = {}
+        scene.close()
