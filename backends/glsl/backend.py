@@ -269,7 +269,7 @@ class GlslBackend(shared.UploadedScene, Backend):
                 else:
                     assert update.rows is not None
                     written += self._device.write_rows(update.table, table, update.rows)
-        self._note_upload(packed, rewritten)
+        self._note_upload(packed, rewritten, {u.table for u in todo})
         return written
 
     def read_table(self, name: str) -> bytes:

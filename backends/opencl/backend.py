@@ -256,7 +256,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
                 rows = table[update.rows.start : update.rows.stop]
                 cl.enqueue_copy(self._queue, buffer, rows, dst_offset=update.rows.start * table.dtype.itemsize)
                 written += rows.nbytes
-        self._note_upload(packed, rewritten)
+        self._note_upload(packed, rewritten, {u.table for u in todo})
         return written
 
     # --- programs -----------------------------------------------------------------------

@@ -258,7 +258,8 @@ class UploadedScene:
         self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
         self._portal_root: int | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
-        self._tlas_lanes = TlasLanes.of(np.zeros(1, layout.TLAS_NODE_DTYPE))
+        self._tlas_nodes = np.zeros(1, layout.TLAS_NODE_DTYPE)
+        self._tlas_lanes: TlasLanes | None = None
         self._box_gap = 0.0
         self._reach = 0.0
         self._features = Features()
@@ -270,8 +271,9 @@ class UploadedScene:
         }  # fmt: skip
         self._uploaded = False
 
-    def _note_upload(self, packed: PackedScene, rewritten: set[str]) -> None:
-        """After an upload; ``rewritten``: the tables written whole (a tree table's depth may have changed)."""
+    def _note_upload(self, packed: PackedScene, rewritten: set[str], written: set[str]) -> None:
+        """After an upload; ``rewritten``: the tables written whole (a tree table's depth may have changed),
+        ``written``: every table written, whole or in rows."""
         if "bvh_nodes" in rewritten:
             self._bvh = bvh_defines(packed.tables["bvh_nodes"], packed.counts.get("bvh_nodes", 0))
         if "tlas_nodes" in rewritten:
@@ -290,8 +292,12 @@ class UploadedScene:
         self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
-        # ... and the tree over them, for the instances the camera sees (the view tiles; a copy, likewise).
-        self._tlas_lanes = TlasLanes.of(packed.tables["tlas_nodes"][: max(1, packed.counts.get("tlas_nodes", 0))])
+        # ... and the tree over them, for the instances the camera sees (the view tiles; a copy, likewise): its
+        # lanes are made when a frame's tiles first need them, so a tick that moves an instance inside its fat
+        # leaf (no tree row written) or renders no tiles pays nothing for them.
+        if "tlas_nodes" in written:
+            self._tlas_nodes = packed.tables["tlas_nodes"][: max(1, packed.counts.get("tlas_nodes", 0))].copy()
+            self._tlas_lanes = None
         # ... and what FACE_NEXT_ONLY's proof needs: the boxes' least gap, the largest |p| of what rays meet.
         self._box_gap = float(self._boxes["rotation"][:, 1, 3].min()) if self._boxes.size else 0.0
         corners = [self._bounds[0], self._bounds[1]]
@@ -339,6 +345,13 @@ class UploadedScene:
                 return features
         return replace(features, portals=False, aberration_modes=frozenset())
 
+    def _instance_lanes(self) -> TlasLanes:
+        """The uploaded instance tree as lanes for the host's walks (engine.tlas_wide.TlasLanes), made once per
+        change of the tree."""
+        if self._tlas_lanes is None:
+            self._tlas_lanes = TlasLanes.of(self._tlas_nodes)
+        return self._tlas_lanes
+
     def _frame_view_tiles(
         self, camera: CameraView, width: int, height: int, features: Features, row: np.ndarray
     ) -> FrameTiles | None:
@@ -379,7 +392,7 @@ class UploadedScene:
             height,
             self._origin,
             portals=(self._space_nodes, self._portal_root) if portals and self._portal_root is not None else None,
-            instances=(self._tlas_lanes, *self._bounds) if instances and self._bounds is not None else None,
+            instances=(self._instance_lanes(), *self._bounds) if instances and self._bounds is not None else None,
             instance_max=1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
         )
         return FrameTiles(table, bool(portals), bool(instances), only)

@@ -159,7 +159,7 @@ def frame_space_defines(scene: Scene, position: Vec3 | None = None) -> dict[str,
     packed = packer.packed
     uploaded = UploadedScene()
     uploaded._forget_upload()
-    uploaded._note_upload(packed, set(packed.tables))
+    uploaded._note_upload(packed, set(packed.tables), set(packed.tables))
     view = scene_camera(scene)
     if position is not None:
         view = replace(view, position=np.asarray(position, dtype=np.float64))
