@@ -12,7 +12,6 @@ third of the binary path.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -74,7 +73,8 @@ class WideTlas:
         return sorted(rows)
 
 
-class TlasLanes(NamedTuple):
+@dataclass(frozen=True)
+class TlasLanes:
     """A ``tlas_nodes`` table (binary or wide) as rows of ``width`` lanes, each a child's box, for walks on
     the host (:func:`engine.camera_view.seen_instances`): lane ``row * width + k`` of ``lo``/``hi`` (float64),
     ``kind`` 1 a leaf over instance row ``child``, 0 an interior child (row ``child``), -1 none. Row 0 is the

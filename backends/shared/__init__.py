@@ -18,9 +18,9 @@ macros a prelude must provide.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from importlib import resources
-from typing import ClassVar, NamedTuple
+from typing import ClassVar
 
 import numpy as np
 
@@ -405,7 +405,8 @@ INSTANCE_TILE_MIN = 4
 INSTANCE_TILE_MAX = 16
 
 
-class FrameTiles(NamedTuple):
+@dataclass(frozen=True)
+class FrameTiles:
     """A frame's view tiles: the table and which of its sections the kernels read (an empty one is not)."""
 
     table: np.ndarray
