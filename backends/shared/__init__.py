@@ -374,7 +374,10 @@ class UploadedScene:
         # meshes: with the portal tree's many doors (most first legs end on walls), not where a box or a few
         # portals fill the view and the clearances prove their first legs free (ten-boxes-aberration and
         # -portals on GLSL: 1.19x the time with the lists). INSTANCE_TILES in the extra defines decides alone.
-        wanted = self.instance_tiles and not (features.aberration_modes or (features.portals and not portals))
+        # Beside the portal tree they pay in a deep instance tree only (the hotel's 833 instances: 0.83x the time),
+        # not a shallow one (a floor and 30 boxes among 16 to 1,024 portals in view: 1.05-1.2x).
+        beside = features.portals and not (portals and self._counts.get("instances", 0) >= INSTANCE_TILE_MIN_BESIDE)
+        wanted = self.instance_tiles and not (features.aberration_modes or beside)
         instances = (
             self.extra_defines.get("INSTANCE_TILES", int(wanted))
             and self._bounds is not None
@@ -400,6 +403,9 @@ class UploadedScene:
 
 #: Frames with fewer instances keep the instance tree for every search (a list gains nothing over a short walk).
 INSTANCE_TILE_MIN = 4
+#: ... and beside the portal tree, fewer than this keep it too (its walk is short; the lists' second copy of the
+#: instance code is not).
+INSTANCE_TILE_MIN_BESIDE = 64
 #: A tile listing more instances than this leaves its rays to the tree (a ray slabs every listed box it passes
 #: before its hit, a walk only the nodes it enters).
 INSTANCE_TILE_MAX = 16

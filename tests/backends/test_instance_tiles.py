@@ -12,7 +12,7 @@ from scenes import many_instances
 from test_parity import render
 from test_space_trees import SIZE, TREES_AND_LOOPS, same_frames
 
-from backends.shared import INSTANCE_TILE_MIN
+from backends.shared import INSTANCE_TILE_MIN, INSTANCE_TILE_MIN_BESIDE
 from engine.camera_view import pack_camera, scene_camera
 
 #: Frames with the instances' lists, without them, with every tile of over 3 on the tree (where the tree is
@@ -135,10 +135,11 @@ def default_tiles_used(backend, scene) -> bool:
 
 
 def test_glsl_lists_stay_off_beside_a_box_or_looped_portals(backend_factory):
-    """By default GLSL lists instances in Euclidean frames and beside the portal tree only: beside boxes or a
-    few (looped) portals the lists' second copy of the instance code costs every llvmpipe lane."""
+    """By default GLSL lists instances in Euclidean frames and beside the portal tree over a deep instance tree
+    only: beside boxes, a few (looped) portals or a shallow tree the lists' second copy of the instance code
+    costs every llvmpipe lane more than it saves."""
     backend = backend_factory("glsl", "f32")
-    scene = many_instances(3, 40)
+    scene = many_instances(3, INSTANCE_TILE_MIN_BESIDE - 8)
     scene.set_camera((0.0, 1.8, 12.0), look_at=(0.0, 1.0, 0.0))
     try:
         render(backend, scene, SIZE)
@@ -149,6 +150,10 @@ def test_glsl_lists_stay_off_beside_a_box_or_looped_portals(backend_factory):
         for k in range(12):  # enough portals for their tree
             scene.add_portal_pair(f"qa{k}", f"qb{k}", a=dict(position=(k - 6.0, 1.5, 2.0), scale=(0.3, 0.3, 1.0)),
                                   b=dict(position=(k - 6.0, 1.5, 60.0), scale=(0.3, 0.3, 1.0)))  # fmt: skip
+        render(backend, scene, SIZE)
+        assert backend._space["PORTAL_TREE"] and not default_tiles_used(backend, scene)  # a shallow tree
+        for k in range(8):
+            scene.add_mesh(f"more{k}", "box", position=(k - 4.0, 0.5, -8.0), scale=(0.4, 0.4, 0.4))
         render(backend, scene, SIZE)
         assert backend._space["PORTAL_TREE"] and default_tiles_used(backend, scene)
         scene.add_aberration("box", (0.2, 0.0, 0.0), position=(30.0, 1.0, 30.0), scale=(4.0, 4.0, 4.0))
