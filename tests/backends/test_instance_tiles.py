@@ -26,27 +26,27 @@ VARIANTS: tuple[dict[str, int], ...] = (
 )
 
 
-def instance_tiles_used(backend, scene) -> bool:
-    """Whether the backend's frame of the scene's camera reads the instances' lists (when asked for)."""
-    backend.extra_defines = dict(ON)
+def frame_tiles(backend, scene, defines: dict[str, int]):
+    """The view tiles the backend's frame of the scene's camera takes with ``defines`` as its extra ones."""
+    backend.extra_defines = dict(defines)
     view = scene_camera(scene)
     row = pack_camera(
         view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
     )
     tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
     backend.extra_defines = {}
+    return tiles
+
+
+def instance_tiles_used(backend, scene) -> bool:
+    """Whether the backend's frame of the scene's camera reads the instances' lists (when asked for)."""
+    tiles = frame_tiles(backend, scene, ON)
     return tiles is not None and tiles.instances
 
 
 def lists_alone(backend, scene) -> bool:
     """Whether the lists serve every mesh search of the frame (a Euclidean one without shadows)."""
-    view = scene_camera(scene)
-    backend.extra_defines = dict(ON)
-    row = pack_camera(
-        view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
-    )
-    tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
-    backend.extra_defines = {}
+    tiles = frame_tiles(backend, scene, ON)
     return tiles is not None and tiles.instances_only
 
 
@@ -125,12 +125,7 @@ def test_the_lists_alone_give_the_trees_frames(backend_factory, backend_name, pr
 
 def default_tiles_used(backend, scene) -> bool:
     """Whether the backend's frame reads the instances' lists as it chooses, asked nothing."""
-    backend.extra_defines = {}
-    view = scene_camera(scene)
-    row = pack_camera(
-        view, backend._origin, backend.precision, *SIZE, backend._boxes, backend._bounds, backend._box_tree
-    )
-    tiles = backend._frame_view_tiles(view, *SIZE, backend._frame_features(view, *SIZE), row)
+    tiles = frame_tiles(backend, scene, {})
     return tiles is not None and tiles.instances
 
 
