@@ -20,7 +20,7 @@ import numpy as np
 from aberrant.bench.metrics import Timing, color_error, compare
 from aberrant.bench.reference import ReferenceCache, scene_key
 from aberrant.bench.sweeps import IMAGE_SWEEPS, TARGET_SPP, Setting
-from backends.base import AOVS, Backend, backend_class, probe
+from backends.base import AOVS, Backend, Frame, backend_class, probe
 from backends.samples import render_samples
 from backends.upload import SceneUploader
 from components import Light, Mesh, Transform
@@ -32,6 +32,8 @@ from engine.scene import Scene
 
 #: What the timed frames read back: the colour image, as the app and the CLI do.
 TIMED_AOVS: tuple[str, ...] = ("color",)
+#: What Embree's pairing also times: the hits alone (depth and instance, no shading), as Embree returns them.
+HIT_AOVS: tuple[str, ...] = ("depth", "instance")
 
 
 def _ms(start: float) -> float:
@@ -214,6 +216,14 @@ class CellRunner:
                     uploader.sync(scene, camera.position)
                     timed_frame()  # the shadow-free variant compiles apart
                 row["embree_paired"] = {**self._paired(pair, timed_frame), "shadows_off": bool(lit)}
+                if not reference_backend:
+                    # Embree's side is a closest-hit trace: our frame of the same outputs skips the shading.
+                    def hit_frame() -> Frame:
+                        return backend.render(camera, width, height, HIT_AOVS)
+
+                    hits = hit_frame()  # its variant (no shading) compiles apart
+                    same = all(np.array_equal(hits.aov(n), frame.aov(n)) for n in HIT_AOVS)
+                    row["embree_trace_paired"] = {**self._paired(pair, hit_frame), "same_hits": same}
                 for entity, light in lit:
                     scene.set(entity, light)
                     restore.remove((entity, light))

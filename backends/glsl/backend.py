@@ -319,6 +319,8 @@ class GlslBackend(shared.UploadedScene, Backend):
         for name, binding in OUTPUT_BINDINGS.items():
             defines[f"{name.upper()}_BINDING"] = binding
             defines[f"WRITE_{name.upper()}"] = int(name in aovs)
+        # The texture is the colour: shaded unless the caller asked for other AOVs without it.
+        defines["SHADE"] = int(not aovs or "color" in aovs)
         defines.update(self.extra_defines)
         return defines
 

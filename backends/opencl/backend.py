@@ -361,6 +361,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         features = self._frame_features(camera, width, height)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
         defines = self._defines(features)
+        defines["SHADE"] = int("color" in aovs)  # a frame without colour skips the shading (and its shadow rays)
         defines.update(self._frame_space_defines(features, self._camera_row, self.precision))
         defines.update(self.extra_defines)
         defines.update(shared.view_tile_defines(tiles))

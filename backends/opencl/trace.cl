@@ -4,8 +4,9 @@
  * One work-item per pixel, row 0 = the image's top row. The scene tables come
  * in the order of engine.layout.TABLES, then the camera row and the view tiles, then one buffer
  * per AOV. An AOV the caller did not ask for is passed as a NULL buffer and
- * skipped by a uniform branch, so a single program serves every AOV set (a
- * PoCL build costs seconds; a never-taken branch costs nothing).
+ * skipped by a uniform branch, so one program serves every AOV set with the
+ * colour (a PoCL build costs seconds; a never-taken branch costs nothing), and
+ * one without it every set that skips the shading (SHADE 0).
  */
 
 __kernel void trace(__global const Settings* settings,

@@ -42,6 +42,8 @@
  *   HAS_TEXTURES       some material samples the texel atlas (TEXEL(i))
  *   HAS_SMOOTH         some instance shades with vertex normals (TRIANGLE_NORMAL(i))
  *   HAS_CHECKER        some material has a checker (cell > 0); 1 where not given
+ *   SHADE              the colour is wanted: shade the hit (and trace its shadow rays); 0 for a frame of
+ *                      depth, instance and events only, which Embree's pairing times; 1 where not given
  *   HAS_METRIC HAS_RADIAL HAS_ADDITIVE  the box modes present: only their rules compile
  *   HAS_LIGHTS         Light entities exist (the lights table), else the implicit sun along light_dir
  *   HAS_SHADOWS        a light casts shadows: shadow rays take the journey (journey.h, shadow_lit)
@@ -114,6 +116,9 @@
 #endif
 #ifndef HAS_CHECKER
 #define HAS_CHECKER 1
+#endif
+#ifndef SHADE
+#define SHADE 1
 #endif
 #ifndef REAL_IS_DOUBLE
 #define REAL_IS_DOUBLE 0

@@ -40,8 +40,10 @@ Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
      * code masked on every pass. */
     if (hit.instance >= 0) {
         real len_r = ray.r_len;
+#if SHADE
         real3 position = ray.o + hit.t * ray.r;
         px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
+#endif
         px.depth = TO_FLOAT(ray.L + hit.t * len_r);
         px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
         px.instance = INSTANCE(hit.instance).meta.z;

@@ -299,3 +299,18 @@ def _portal_scene() -> Scene:
     scene.add_portal_pair("door_a", "door_b", a={"position": (0.0, 1.0, 2.0)}, b={"position": (50.0, 1.0, 0.0)})
     scene.add_portal("loose", position=(1.0, 1.0, 1.0))  # unlinked: no portal code of its own
     return scene
+
+
+def test_a_frame_without_colour_skips_the_shading_and_keeps_the_hits(fresh_glsl):
+    """Other AOVs without the colour compile the shading out (SHADE 0: what Embree's pairing times); the hits
+    are the shaded variant's, and a frame with no AOVs still shades the texture the editor draws."""
+    scene = boxes_scene()
+    upload(fresh_glsl, scene)
+    camera = scene_camera(scene)
+    full = fresh_glsl.render(camera, 32, 24, aovs=("color", "depth", "instance"))
+    hits = fresh_glsl.render(camera, 32, 24, aovs=("depth", "instance"))
+    assert (full.aov("instance") >= 0).any()
+    np.testing.assert_array_equal(hits.aov("instance"), full.aov("instance"))
+    np.testing.assert_array_equal(hits.aov("depth"), full.aov("depth"))
+    assert fresh_glsl._defines(("depth", "instance"))["SHADE"] == 0
+    assert fresh_glsl._defines(())["SHADE"] == 1 and fresh_glsl._defines(("color",))["SHADE"] == 1

@@ -357,7 +357,7 @@ def test_a_variant_is_built_once_and_its_kernel_object_kept(fresh_opencl, monkey
     assert fresh_opencl.compile_count == 0
     fresh_opencl.render(camera, 32, 24, aovs=("color", "depth"))
     fresh_opencl.render(camera, 32, 24, aovs=("color", "depth"))
-    fresh_opencl.render(camera, 48, 24, aovs=("instance",))  # other size and AOVs: the same program
+    fresh_opencl.render(camera, 48, 24, aovs=("color", "instance"))  # other size and AOVs: the same program
     upload(fresh_opencl, boxes_scene())  # same features: the same variant
     fresh_opencl.render(camera, 32, 24)
     assert fresh_opencl.compile_count == 1
@@ -450,3 +450,16 @@ def test_f32_agrees_with_glsl_f32(backend_factory, tmp_path_factory, case):
     same = (mine.instance == theirs.instance) & (mine.instance >= 0)
     rel = np.abs(mine.depth[same].astype(np.float64) - theirs.depth[same]) / theirs.depth[same]
     assert float(np.percentile(rel, 99)) <= 1e-5
+
+
+def test_a_frame_without_colour_skips_the_shading_and_keeps_the_hits(fresh_opencl):
+    """The hits-only variant (SHADE 0: what Embree's pairing times) is a program of its own with the same hits."""
+    scene = boxes_scene()
+    upload(fresh_opencl, scene)
+    camera = scene_camera(scene)
+    full = fresh_opencl.render(camera, 32, 24, aovs=("color", "depth", "instance"))
+    hits = fresh_opencl.render(camera, 32, 24, aovs=("depth", "instance"))
+    assert fresh_opencl.compile_count == 2
+    assert (full.aov("instance") >= 0).any()
+    np.testing.assert_array_equal(hits.aov("instance"), full.aov("instance"))
+    np.testing.assert_array_equal(hits.aov("depth"), full.aov("depth"))

@@ -9,6 +9,7 @@ import pytest
 from conftest import require_backend
 
 from aberrant.bench.architecture import closed_portals, strips_mesh
+from aberrant.bench.report import best_ratio
 from aberrant.bench.scenes import bench_scenes, resolve_scenes
 from aberrant.cli import main
 from components import Aberration, Mesh, Portal, Transform
@@ -108,6 +109,10 @@ def test_a_tiny_run_reports_the_hotel_and_the_embree_ratio_of_a_level(tmp_path):
         ):
             assert row["embree_paired"]["ratio"] > 0
             assert row["embree_paired"]["shadows_off"] is False  # no light: the frame is the one timed
+            # ... and again as the hits alone, Embree's outputs: the same hits, the ratio the targets read
+            trace = row["embree_trace_paired"]
+            assert trace["ratio"] > 0 and trace["same_hits"] is True
+            assert best_ratio(row) == trace["ratio"]
 
 
 @pytest.mark.slow
