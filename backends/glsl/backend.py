@@ -157,7 +157,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         self._forget_upload()
         #: Whether frames may take view tiles: their image unit exists with the image store only.
         self.view_tiles = self.table_store == "image"
-        #: ... and the instances' lists among them (README.md's table: llvmpipe gains where PoCL does not).
+        #: ... and the instances' lists among them (README.md's table).
         self.instance_tiles = self.view_tiles
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None

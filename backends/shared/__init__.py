@@ -243,8 +243,8 @@ class UploadedScene:
     #: Whether camera rays take their first leg's portals (VIEW_TILES) from the frame's view tiles where that
     #: frame allows (interleaved A/B in README.md's table; boxes keep their tree: no gain there).
     view_tiles: bool = True
-    #: ... and their first mesh search's instances (INSTANCE_TILES): each backend's own (README.md's table; on
-    #: PoCL only the hotel's frames gained, the village's and the house's lost), ``INSTANCE_TILES=1`` asks.
+    #: ... and their first mesh search's instances (INSTANCE_TILES): each backend's own (README.md's table),
+    #: ``INSTANCE_TILES=1`` or ``=0`` in the extra defines decides alone.
     instance_tiles: bool = False
     #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
     #: building that section of the tiles).
