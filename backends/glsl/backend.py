@@ -300,6 +300,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
             TLAS_WIDTH=self._tlas_width,
+            **self._instance_search_defines(),
             **self._space,
             WORKGROUP_X=self.workgroup[0],
             WORKGROUP_Y=self.workgroup[1],

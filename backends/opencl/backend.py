@@ -282,6 +282,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
             **self._bvh,
             TLAS_STACK_SIZE=self._tlas_stack,
             TLAS_WIDTH=self._tlas_width,
+            **self._instance_search_defines(),
             **self._space,
         )
         defines.update(self.extra_defines)
