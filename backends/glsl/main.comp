@@ -1,7 +1,7 @@
 /* main.comp -- the GLSL compute entry point (after prelude, layout.h, bindings.glsl and the shared
  * tracer files, core.h to pixel.h).
  *
- * One invocation per pixel. The colour always goes to an rgba8 image (the
+ * One invocation per pixel. The colour goes to an rgba8 image (the
  * editor draws it without a read-back; texel row 0 is the image's top row);
  * the other AOVs go to storage buffers, each compiled in only when requested.
  */
@@ -46,8 +46,11 @@ void main()
     }
     Pixel px = trace_pixel(cam, p.x, p.y);
     int index = p.y * cam.size.x + p.x;
-    /* Exact: the unorm8 conversion of q / 255 rounds back to the integer q. */
+#if SHADE
+    /* Exact: the unorm8 conversion of q / 255 rounds back to the integer q. A frame of other AOVs without
+     * the colour (SHADE 0) leaves the image as it was. */
     imageStore(color_image, p, px.color * (1.0 / 255.0));
+#endif
 #if WRITE_DEPTH
     depth_out[index] = px.depth;
 #endif
