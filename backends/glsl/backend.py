@@ -79,6 +79,11 @@ def lane_block(workgroup: tuple[int, int], block: tuple[int, int] = LANE_BLOCK) 
     return (workgroup[0], 1)
 
 
+def shades(aovs: Sequence[str]) -> bool:
+    """Whether a frame of ``aovs`` shades: the texture is its colour, wanted unless other AOVs come without it."""
+    return not aovs or "color" in aovs
+
+
 #: Shader source files, in assembly order (package, name).
 _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.glsl", "prelude.glsl"),
@@ -320,8 +325,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         for name, binding in OUTPUT_BINDINGS.items():
             defines[f"{name.upper()}_BINDING"] = binding
             defines[f"WRITE_{name.upper()}"] = int(name in aovs)
-        # The texture is the colour: shaded unless the caller asked for other AOVs without it.
-        defines["SHADE"] = int(not aovs or "color" in aovs)
+        defines["SHADE"] = int(shades(aovs))
         defines.update(self.extra_defines)
         return defines
 
@@ -370,7 +374,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             row = pack_camera(
                 camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
             )
-            features = self._frame_features(camera, width, height)
+            features = self._frame_features(camera, width, height, shade=shades(aovs))
             defines = self._defines(aovs, features)
             tiles = self._frame_view_tiles(camera, width, height, features, row)
             defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)

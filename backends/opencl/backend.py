@@ -363,7 +363,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._camera_row = pack_camera(
             camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
         )
-        features = self._frame_features(camera, width, height)
+        features = self._frame_features(camera, width, height, shade="color" in aovs)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
         defines = self._defines(features)
         defines["SHADE"] = int("color" in aovs)  # a frame without colour skips the shading (and its shadow rays)

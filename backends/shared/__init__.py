@@ -331,11 +331,12 @@ class UploadedScene:
             "FACE_NEXT_ONLY": int(np.isfinite(self._box_gap) and self._box_gap > 4.0 * nudge),
         }
 
-    def _frame_features(self, camera: CameraView, width: int, height: int) -> Features:
-        """The features a frame needs: none of the space's where the host proves that no primary ray meets a
-        portal or a box (all outside the camera's pyramid, the camera in no box). Every ray then has one leg,
-        and the Euclidean variant gives the same frame without paying for the space's code."""
-        features = self._features
+    def _frame_features(self, camera: CameraView, width: int, height: int, shade: bool = True) -> Features:
+        """The features a frame needs: no shadows without shading (``shade`` False: no colour asked for); none of
+        the space's where the host proves that no primary ray meets a portal or a box (all outside the camera's
+        pyramid, the camera in no box). Every ray then has one leg, and the Euclidean variant gives the same
+        frame without paying for the space's code."""
+        features = self._features if shade or not self._features.shadows else replace(self._features, shadows=False)
         if not (features.portals or features.aberration_modes) or features.shadows:
             return features  # shadow rays start anywhere: they may meet what no primary ray does
         aspect = width / height

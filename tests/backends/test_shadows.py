@@ -16,6 +16,7 @@ from scenes import EVERY, FAST, assert_agrees, render_aovs, upload_to_reference
 
 from backends.base import AOVS
 from components import Light
+from engine.camera_view import scene_camera
 from engine.errors import SceneError
 from engine.scene import Scene
 
@@ -183,6 +184,19 @@ def test_every_backend_draws_the_reference_shadows(case, backend, precision, bac
     shade = ref.color[..., :3].astype(int).sum(axis=2)
     floor = ref.instance == scene.entity("floor")
     assert shade[floor].min() < 0.6 * shade[floor].max()  # a shadow is in view
+
+
+@pytest.mark.parametrize(("backend", "precision"), [p for p in FAST if p.id.endswith("f32")])
+def test_a_frame_without_colour_traces_no_shadow_rays_and_keeps_the_hits(backend, precision, backend_factory, scenes):
+    """Without the colour nothing is shaded (SHADE 0), so the frame's variant has no shadows either."""
+    scene = box_shadow_through_portal()
+    scenes.append(scene)
+    fast = backend_factory(backend, precision)
+    full = render_aovs(fast, scene, *SIZE, AOVS)
+    hits = render_aovs(fast, scene, *SIZE, ("depth", "instance", "events"))
+    assert fast._features.shadows and not fast._frame_features(scene_camera(scene), *SIZE, shade=False).shadows
+    for name in ("depth", "instance", "events"):
+        np.testing.assert_array_equal(getattr(hits, name), getattr(full, name))
 
 
 @pytest.mark.parametrize(("backend", "precision"), [p for p in FAST if p.id.endswith("f32")])
