@@ -92,8 +92,11 @@ def _targets(results: dict[str, Any]) -> list[str]:
             ok = ratio >= goal if at == TARGET_SIZE else None
             paired = row.get("embree_paired")
             shaded = frame_ratio(row)
-            how = f"hits only; the shaded frame {_ratio(shaded)}, " if shaded is not None else ""
-            how += f"paired; {_ratio(row['embree_ratio'])} from the medians, " if paired else ""
+            if shaded is not None:
+                how = f"the hits alone, paired; the shaded frame {_ratio(shaded)} paired, "
+                how += f"{_ratio(row['embree_ratio'])} from its medians, "
+            else:
+                how = f"paired; {_ratio(row['embree_ratio'])} from the medians, " if paired else ""
             measured = f"{_ratio(ratio)} ({how}{_num(row['mrays_per_s'])} Mrays/s){note}"
             rows.append([f"{family} / Embree rays/s, {scene}", measured, f">= {goal}x", _mark(ok)])
     families = sorted({r["family"] for r in results["rows"]})
