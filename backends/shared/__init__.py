@@ -28,6 +28,7 @@ from engine import layout
 from engine.box_clearance import instance_bounds
 from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
+from engine.portal_legs import portal_legs
 from engine.tlas import rows_at
 from engine.tlas_wide import TlasLanes
 from engine.view_tiles import TILE_LOG2, view_tiles
@@ -257,6 +258,7 @@ class UploadedScene:
         self._box_tree: tuple[np.ndarray, int] | None = None
         self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
         self._portal_root: int | None = None
+        self._portals: np.ndarray | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._tlas_nodes = np.zeros(1, layout.TLAS_NODE_DTYPE)
         self._tlas_lanes: TlasLanes | None = None
@@ -290,6 +292,7 @@ class UploadedScene:
         self._space_nodes = nodes
         self._box_tree = (nodes, int(roots[1])) if self._boxes.size else None
         self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
+        self._portals = packed.tables["portals"][: packed.counts.get("portals", 0)].copy()
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
         # ... and the tree over them, for the instances the camera sees (the view tiles; a copy, likewise): its
@@ -383,12 +386,34 @@ class UploadedScene:
             and self._bounds is not None
             and len(self._bounds[0]) >= INSTANCE_TILE_MIN
         )
+        # The legs after the first portals (engine/portal_legs.py), kept where they prove every mesh search of the
+        # frame a first or second leg with its list: the tree's walk is then compiled out (ten-boxes-portals on
+        # GLSL: 0.91x the time). Not beside the portal tree: the hotel's 55-93 portals in view cost 35-75 ms of
+        # host time a frame, and its rooms' further doors leave the proof short. PORTAL_LEGS in the extra defines asks.
+        legs = None
+        if (
+            self.extra_defines.get("PORTAL_LEGS", int(self.instance_tiles))
+            and self.extra_defines.get("INSTANCE_TILES", 1)
+            and features.portals
+            and not (features.aberration_modes or features.shadows or self._space["PORTAL_TREE"])
+            and self._bounds is not None
+            and self._portals is not None
+            and len(self._bounds[0]) >= INSTANCE_TILE_MIN
+        ):
+            legs = portal_legs(
+                camera, width, height, self._origin, self._portals, (self._instance_lanes(), *self._bounds), TILE_LOG2
+            )
+            legs = legs if legs.complete else None
+            instances = instances or legs is not None
         if not (portals or instances):
             return None
-        # A Euclidean frame without shadows searches the meshes only on its camera rays' first legs: the lists
-        # serve every search (none too long to list), and the tree's walk is compiled out.
-        only = bool(instances) and not (features.portals or features.aberration_modes or features.shadows)
+        # A Euclidean frame without shadows searches the meshes only on its camera rays' first legs (or, its portal
+        # legs complete, on their second ones): the lists serve every search (none too long to list), and the
+        # tree's walk is compiled out.
+        only = bool(instances) and not (features.aberration_modes or features.shadows)
+        only = only and (not features.portals or legs is not None)
         only = only and bool(self.extra_defines.get("INSTANCE_TILES_ONLY", 1))
+        instance_max = 1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX)
         table = view_tiles(
             camera,
             width,
@@ -396,9 +421,11 @@ class UploadedScene:
             self._origin,
             portals=(self._space_nodes, self._portal_root) if portals and self._portal_root is not None else None,
             instances=(self._instance_lanes(), *self._bounds) if instances and self._bounds is not None else None,
-            instance_max=1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
+            instance_max=instance_max,
+            legs=(legs, len(self._portals)) if legs is not None and self._portals is not None else None,
         )
-        return FrameTiles(table, bool(portals), bool(instances), only)
+        free = legs is not None and bool(self.extra_defines.get("PORTAL_LEGS_FREE", 1))
+        return FrameTiles(table, bool(portals), bool(instances), only, legs is not None, free)
 
 
 #: Frames with fewer instances keep the instance tree for every search (a list gains nothing over a short walk).
@@ -420,16 +447,22 @@ class FrameTiles:
     instances: bool
     #: Whether the instances' lists serve every mesh search of the frame (INSTANCE_TILES_ONLY).
     instances_only: bool = False
+    #: Whether the table holds the portal legs' lists (PORTAL_LEGS) ...
+    portal_legs: bool = False
+    #: ... and whether they prove that no later leg meets a portal (PORTAL_LEGS_FREE).
+    portal_legs_free: bool = False
 
 
 def view_tile_defines(tiles: FrameTiles | None) -> dict[str, int]:
     """The defines of a frame's view tiles, after the backend's extra defines (which ask for the tiles: the
     frame decides whether its kernel reads them)."""
     if tiles is None:
-        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0, "INSTANCE_TILES_ONLY": 0}
+        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0, "INSTANCE_TILES_ONLY": 0, "PORTAL_LEGS": 0, "PORTAL_LEGS_FREE": 0}
     return {
         "VIEW_TILES": int(tiles.portals),
         "INSTANCE_TILES": int(tiles.instances),
         "INSTANCE_TILES_ONLY": int(tiles.instances_only),
+        "PORTAL_LEGS": int(tiles.portal_legs),
+        "PORTAL_LEGS_FREE": int(tiles.portal_legs_free),
         "VIEW_TILE_LOG2": TILE_LOG2,
     }
