@@ -150,7 +150,10 @@ def _reachable(
     for p in rows:
         linear, shift = w2l[p, :, :3], w2l[p, :, 3]
         o, d = linear @ apex + shift, rays @ linear.T  # quad space: z = 0 the quad's plane
-        if not (np.all(d[:, 2] * o[2] < 0.0)):
+        # Towards the plane, and far enough from it that no first leg starts past it (t_min).
+        if not np.all(d[:, 2] * o[2] < 0.0) or abs(o[2]) / np.linalg.norm(linear[2]) <= HIDE_MARGIN * max(
+            1.0, float(np.linalg.norm(apex))
+        ):
             continue
         hit = o[None, :2] - d[:, :2] * (o[2] / d[:, 2])[:, None]
         if np.abs(hit).max() > 1.0 - HIDE_MARGIN:
