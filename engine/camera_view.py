@@ -133,7 +133,7 @@ def view_planes(view: CameraView, aspect: float) -> np.ndarray:
     return np.where((normals @ forward)[:, None] < 0.0, -normals, normals)
 
 
-def _boxes_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+def boxes_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Which boxes lo/hi (n, 3) are not wholly outside one of the pyramid's planes (apex: the camera)."""
     # Each box's corner furthest along each normal, relative to the apex: (n, planes, 3).
     lo, hi = lo - apex, hi - apex
@@ -154,7 +154,7 @@ def seen_leaves(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.n
         if not frontier.size:
             break
         lo, hi = nodes["bounds_min"][frontier].astype(np.float64), nodes["bounds_max"][frontier].astype(np.float64)
-        frontier = frontier[_boxes_seen(planes, apex, lo, hi)]
+        frontier = frontier[boxes_seen(planes, apex, lo, hi)]
         leaf = nodes["count"][frontier] > 0
         leaves.append(frontier[leaf])
         first = nodes["first"][frontier[~leaf]].astype(np.int64)
@@ -176,7 +176,7 @@ def seen_instances(view: CameraView, aspect: float, origin: np.ndarray, lanes: T
             break
         live = (frontier[:, None] * lanes.width + lane).ravel()
         live = live[lanes.kind[live] >= 0]
-        live = live[_boxes_seen(planes, apex, lanes.lo[live], lanes.hi[live])]
+        live = live[boxes_seen(planes, apex, lanes.lo[live], lanes.hi[live])]
         kind, child = lanes.kind[live], lanes.child[live]
         rows.append(child[kind == 1])
         frontier = child[kind == 0]
@@ -193,7 +193,7 @@ def view_reaches(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.
     while stack:
         node = stack.pop()
         lo, hi = nodes["bounds_min"][node : node + 1].astype(np.float64), nodes["bounds_max"][node : node + 1]
-        if not _boxes_seen(planes, apex, lo, hi.astype(np.float64))[0]:
+        if not boxes_seen(planes, apex, lo, hi.astype(np.float64))[0]:
             continue
         if nodes["count"][node] > 0:
             return True

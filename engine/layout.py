@@ -330,7 +330,11 @@ CAMERA = Record(
 #: (tile row 0 at the image's top): ``entry = (first portal entry, count, first instance entry, count)``; each
 #: row after them holds a portal or instance row in ``entry.x`` and its box's distance from the camera
 #: (float32 bits, a lower bound of any hit's t) in ``entry.y``, each tile's nearest first; the portals' rows
-#: come first.
+#: come first. With the portal legs' lists (:mod:`engine.portal_legs`, PORTAL_LEGS) the tiles' headers are
+#: followed by a slot map, one row per portal row: ``(first header, x0 | x1 << 16, y0 | y1 << 16, 0)``, the
+#: tile rect its first legs can cross it in, first header -1 for none; then each slot's headers, one per tile of
+#: its rect in row-major order, ``(first entry, count, 0, 0)`` (count -1: the tree); their rows (instance row,
+#: a lower bound of the second leg's t) come after the instances'.
 VIEW_TILE = Record("ViewTile", (Field("entry", "int4"),))
 VIEW_TILE_DTYPE = VIEW_TILE.dtype()
 

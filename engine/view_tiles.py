@@ -14,12 +14,16 @@ tree's one. The table (:data:`engine.layout.VIEW_TILE`) is CSR: a header row per
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from engine import layout
 from engine.camera_view import CameraView, seen_instances, seen_leaves
 from engine.tlas_wide import TlasLanes
+
+if TYPE_CHECKING:
+    from engine.portal_legs import PortalLegs
 
 #: log2 of a tile's side in pixels: 8 x 8, the GLSL backend's work-group, whose 4 x 2 lane blocks each lie in
 #: one tile (llvmpipe runs a block's 8 lanes as one vector: one list for them all).
@@ -89,7 +93,7 @@ def leaf_tiles(
     return out, distance
 
 
-def _tile_rows(
+def tile_rows(
     ranges: np.ndarray, rows: np.ndarray, distance: np.ndarray, tiles_x: int, tiles: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Each tile's rows among those of ``ranges``: the rows and their distances sorted by tile, then nearest
@@ -108,6 +112,19 @@ def _tile_rows(
     return rows[leaf], distance[leaf], np.bincount(tile, minlength=tiles)
 
 
+def cut_long(
+    part: tuple[np.ndarray, np.ndarray, np.ndarray], instance_max: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A section's rows, bounds and counts without the tiles listing more than ``instance_max``: those tiles'
+    rays walk the tree (count -1), as a long list slabs more boxes than its walk."""
+    rows, near, counts = part
+    long = counts > instance_max
+    if not long.any():
+        return part
+    keep = ~np.repeat(long, np.maximum(counts, 0))
+    return rows[keep], near[keep], np.where(long, -1, counts)
+
+
 def _section(
     view: CameraView,
     width: int,
@@ -122,7 +139,7 @@ def _section(
     per tile nearest first, with their distances, and the count per tile."""
     tiles_x, tiles_y = tile_grid(width, height, log2)
     ranges, distance = leaf_tiles(view, width, height, origin, lo, hi, log2)
-    return _tile_rows(ranges, rows, distance, tiles_x, tiles_x * tiles_y)
+    return tile_rows(ranges, rows, distance, tiles_x, tiles_x * tiles_y)
 
 
 def view_tiles(
@@ -134,11 +151,13 @@ def view_tiles(
     instances: tuple[TlasLanes, np.ndarray, np.ndarray] | None = None,
     log2: int = TILE_LOG2,
     instance_max: int = 1 << 30,
+    legs: tuple[PortalLegs, int] | None = None,
 ) -> np.ndarray:
     """The frame's :data:`engine.layout.VIEW_TILE` table: for each tile the portal rows (``portals``: the
     ``space_nodes`` table and the portals' root) and the instance rows (``instances``: the ``tlas_nodes``
     table's lanes and the instances' exact bounds, camera-relative) its primary rays' first legs may meet; a section
-    not asked for is empty. A tile with more than ``instance_max`` instances lists none, its count -1."""
+    not asked for is empty. A tile with more than ``instance_max`` instances lists none, its count -1. ``legs``: the
+    portal legs' lists (:mod:`engine.portal_legs`) and the number of portal rows, for their slot map."""
     tiles_x, tiles_y = tile_grid(width, height, log2)
     tiles = tiles_x * tiles_y
     aspect = width / height
@@ -152,19 +171,27 @@ def view_tiles(
     if instances is not None:
         tlas, lo, hi = instances
         rows = seen_instances(view, aspect, origin, tlas)
-        rows, near, counts = _section(view, width, height, origin, rows, lo[rows], hi[rows], log2)
-        long = counts > instance_max
-        if long.any():  # those tiles' rays walk the tree (count -1): a long list slabs more boxes than its walk
-            keep = ~np.repeat(long, counts)
-            rows, near, counts = rows[keep], near[keep], np.where(long, -1, counts)
-        instance_part = rows, near, counts
-    table = np.zeros(tiles + len(portal_part[0]) + len(instance_part[0]), layout.VIEW_TILE_DTYPE)
+        instance_part = cut_long(_section(view, width, height, origin, rows, lo[rows], hi[rows], log2), instance_max)
+    # Each part: where its headers lie, the column of theirs it fills, its rows.
+    parts = [(slice(0, tiles), 0, portal_part), (slice(0, tiles), 2, instance_part)]
+    slot_rows = 0
+    if legs is not None:  # after the tiles' headers the slot map (a row per portal), then the slots' headers
+        slot_rows = legs[1] + sum(len(counts) for _, _, counts in legs[0].lists)
+        base = tiles + legs[1]
+        for part in legs[0].lists:
+            parts.append((slice(base, base + len(part[2])), 0, part))
+            base += len(part[2])
+    table = np.zeros(tiles + slot_rows + sum(len(part[0]) for *_, part in parts), layout.VIEW_TILE_DTYPE)
     entry = table["entry"]
-    start = tiles
-    for column, (rows, near, counts) in ((0, portal_part), (2, instance_part)):
+    if legs is not None:
+        entry[tiles : tiles + legs[1]] = (-1, 0, 0, 0)
+        for row, (x0, y0, x1, y1), (heads, _, _) in zip(legs[0].rows, legs[0].rects, parts[2:], strict=True):
+            entry[tiles + row] = (heads.start, x0 | (x1 << 16), y0 | (y1 << 16), 0)
+    start = tiles + slot_rows
+    for heads, column, (rows, near, counts) in parts:
         listed = np.maximum(counts, 0)
-        entry[:tiles, column] = start + np.cumsum(listed) - listed
-        entry[:tiles, column + 1] = counts
+        entry[heads, column] = start + np.cumsum(listed) - listed
+        entry[heads, column + 1] = counts
         entry[start : start + len(rows), 0] = rows
         entry[start : start + len(rows), 1] = near.astype(np.float32).view(np.int32)
         start += len(rows)

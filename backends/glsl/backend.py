@@ -164,6 +164,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         self.view_tiles = self.table_store == "image"
         #: ... and the instances' lists among them (README.md's table).
         self.instance_tiles = self.view_tiles
+        self.portal_legs = self.view_tiles
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)

@@ -18,7 +18,7 @@ macros a prelude must provide.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from importlib import resources
 from typing import ClassVar
 
@@ -30,8 +30,12 @@ from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
 from engine.packed import Features, PackedScene
 from engine.tlas import rows_at
 from engine.tlas_wide import TlasLanes
-from engine.view_tiles import TILE_LOG2, view_tiles
 
+from .frame_tiles import INSTANCE_TILE_MAX as INSTANCE_TILE_MAX
+from .frame_tiles import INSTANCE_TILE_MIN as INSTANCE_TILE_MIN
+from .frame_tiles import INSTANCE_TILE_MIN_BESIDE as INSTANCE_TILE_MIN_BESIDE
+from .frame_tiles import FrameTiles, frame_view_tiles
+from .frame_tiles import view_tile_defines as view_tile_defines
 from .layout_h import layout_h
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
@@ -246,6 +250,9 @@ class UploadedScene:
     #: ... and their first mesh search's instances (INSTANCE_TILES): each backend's own (README.md's table),
     #: ``INSTANCE_TILES=1`` or ``=0`` in the extra defines decides alone.
     instance_tiles: bool = False
+    #: ... and the leg after a first portal's instances (PORTAL_LEGS), where the frame allows: GLSL's (PoCL: 1.02x
+    #: ten-boxes-portals' time at 400x400, 0.97x at 800x800), ``PORTAL_LEGS=1`` or ``=0`` decides alone.
+    portal_legs: bool = False
     #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
     #: building that section of the tiles).
     extra_defines: dict[str, int]
@@ -257,6 +264,7 @@ class UploadedScene:
         self._box_tree: tuple[np.ndarray, int] | None = None
         self._space_nodes = np.zeros(1, layout.SPACE_NODE_DTYPE)
         self._portal_root: int | None = None
+        self._portals: np.ndarray | None = None
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._tlas_nodes = np.zeros(1, layout.TLAS_NODE_DTYPE)
         self._tlas_lanes: TlasLanes | None = None
@@ -290,6 +298,7 @@ class UploadedScene:
         self._space_nodes = nodes
         self._box_tree = (nodes, int(roots[1])) if self._boxes.size else None
         self._portal_root = int(roots[0]) if packed.counts.get("portals", 0) else None
+        self._portals = packed.tables["portals"][: packed.counts.get("portals", 0)].copy()
         # The instances' bounds, for the camera's clearance (pack_camera: the first mesh search it proves empty).
         self._bounds = instance_bounds(packed)
         # ... and the tree over them, for the instances the camera sees (the view tiles; a copy, likewise): its
@@ -361,81 +370,5 @@ class UploadedScene:
     def _frame_view_tiles(
         self, camera: CameraView, width: int, height: int, features: Features, row: np.ndarray
     ) -> FrameTiles | None:
-        """The frame's view tiles (engine/view_tiles.py) where its camera rays' first legs can use them: a first
-        leg that starts at the camera in no box (``size.z`` -1, so its direction is the primary ray's); portals
-        found through their tree, instances through theirs with at least :data:`INSTANCE_TILE_MIN` of them;
-        else None, and the trees serve every leg."""
-        if not self.view_tiles:
-            return None
-        if features.aberration_modes and int(row["size"][0, 2]) != -1:
-            return None
-        portals = (
-            self.extra_defines.get("VIEW_TILES", 1)
-            and features.portals
-            and self._space["PORTAL_TREE"]
-            and self._portal_root is not None
-        )
-        # Beside portals or boxes the lists are a second copy of the instance code (later legs keep the tree),
-        # which llvmpipe runs for every lane; by default it is used only where most first legs search the
-        # meshes: with the portal tree's many doors (most first legs end on walls), not where a box or a few
-        # portals fill the view and the clearances prove their first legs free (ten-boxes-aberration and
-        # -portals on GLSL: 1.19x the time with the lists). INSTANCE_TILES in the extra defines decides alone.
-        # Beside the portal tree they pay in a deep instance tree only (the hotel's 833 instances: 0.83x the time),
-        # not a shallow one (a floor and 30 boxes among 16 to 1,024 portals in view: 1.05-1.2x).
-        beside = features.portals and not (portals and self._counts.get("instances", 0) >= INSTANCE_TILE_MIN_BESIDE)
-        wanted = self.instance_tiles and not (features.aberration_modes or beside)
-        instances = (
-            self.extra_defines.get("INSTANCE_TILES", int(wanted))
-            and self._bounds is not None
-            and len(self._bounds[0]) >= INSTANCE_TILE_MIN
-        )
-        if not (portals or instances):
-            return None
-        # A Euclidean frame without shadows searches the meshes only on its camera rays' first legs: the lists
-        # serve every search (none too long to list), and the tree's walk is compiled out.
-        only = bool(instances) and not (features.portals or features.aberration_modes or features.shadows)
-        only = only and bool(self.extra_defines.get("INSTANCE_TILES_ONLY", 1))
-        table = view_tiles(
-            camera,
-            width,
-            height,
-            self._origin,
-            portals=(self._space_nodes, self._portal_root) if portals and self._portal_root is not None else None,
-            instances=(self._instance_lanes(), *self._bounds) if instances and self._bounds is not None else None,
-            instance_max=1 << 30 if only else self.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX),
-        )
-        return FrameTiles(table, bool(portals), bool(instances), only)
-
-
-#: Frames with fewer instances keep the instance tree for every search (a list gains nothing over a short walk).
-INSTANCE_TILE_MIN = 4
-#: ... and beside the portal tree, fewer than this keep it too (its walk is short; the lists' second copy of the
-#: instance code is not).
-INSTANCE_TILE_MIN_BESIDE = 64
-#: A tile listing more instances than this leaves its rays to the tree (a ray slabs every listed box it passes
-#: before its hit, a walk only the nodes it enters).
-INSTANCE_TILE_MAX = 16
-
-
-@dataclass(frozen=True)
-class FrameTiles:
-    """A frame's view tiles: the table and which of its sections the kernels read (an empty one is not)."""
-
-    table: np.ndarray
-    portals: bool
-    instances: bool
-    #: Whether the instances' lists serve every mesh search of the frame (INSTANCE_TILES_ONLY).
-    instances_only: bool = False
-
-
-def view_tile_defines(tiles: FrameTiles | None) -> dict[str, int]:
-    """The defines of a frame's view tiles, after the backend's extra defines (which ask for the tiles: the
-    frame decides whether its kernel reads them)."""
-    if tiles is None:
-        return {"VIEW_TILES": 0, "INSTANCE_TILES": 0, "INSTANCE_TILES_ONLY": 0}
-    return {
-        "VIEW_TILES": int(tiles.portals),
-        "INSTANCE_TILES": int(tiles.instances),
-        "INSTANCE_TILES_ONLY": int(tiles.instances_only),
-        "VIEW_TILE_LOG2": TILE_LOG2,
-    }
+        """The frame's view tiles, or None (:func:`backends.shared.frame_tiles.frame_view_tiles`)."""
+        return frame_view_tiles(self, camera, width, height, features, row)

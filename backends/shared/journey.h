@@ -14,6 +14,41 @@
 #define TILED_ARG(tiled, tile)
 #endif
 
+#if PORTAL_LEGS && HAS_PORTALS
+/* The header row, in the view tiles' table, of the instance list for the leg after a camera ray's first leg
+ * crossed portal row in tile (engine/portal_legs.py): the slot map's row for the portal (after the tiles'
+ * headers) names its headers, one per tile of its rect; -1 where the portal has none or the tile lies outside
+ * it (that leg walks the tree). */
+FORCE_INLINE int portal_leg_head(SCENE_DECL Camera cam, int tile, int row)
+{
+    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
+    int tiles_y = (cam.size.y + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
+    int4 slot = VIEW_TILE(tiles_x * tiles_y + row).entry;
+    int tx = tile - (tile / tiles_x) * tiles_x;
+    int ty = tile / tiles_x;
+    int x0 = slot.y & 0xFFFF;
+    int x1 = slot.y >> 16;
+    int y0 = slot.z & 0xFFFF;
+    int y1 = slot.z >> 16;
+    bool inside = slot.x >= 0 && tx >= x0 && tx <= x1 && ty >= y0 && ty <= y1;
+    return inside ? slot.x + (ty - y0) * (x1 - x0 + 1) + (tx - x0) : -1;
+}
+
+/* Before a camera ray's first crossing (kind, of the leg events ev): its next leg's list of instances. */
+#define PORTAL_LEG_LIST(kind, ev)                                                                          \
+    if (tiled && ray.n == 0) {                                                                             \
+        int head = kind == EVENT_PORTAL ? portal_leg_head(SCENE_PASS cam, tile, ev.portal.row) : -1;       \
+        int4 list = VIEW_TILE(max(head, 0)).entry;                                                         \
+        tile_first = list.x;                                                                               \
+        tile_count = head >= 0 ? list.y : -1;                                                              \
+    }
+/* Camera rays search their first two legs with lists: the second's is -1 where it has none. */
+#define TILE_LEG(n) ((n) <= 1)
+#else
+#define PORTAL_LEG_LIST(kind, ev)
+#define TILE_LEG(n) ((n) == 0)
+#endif
+
 /* A ray's state at its start (docs/semantics.md section 1): from o along unit d, no box yet, nothing left. */
 FORCE_INLINE Ray start_ray(real3 o, real3 d)
 {
@@ -108,6 +143,13 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray TILED_DECL)
     ev.search = true;
 #if HAS_PORTALS
     int skip_portal = ray.leaving_kind == EVENT_PORTAL ? ray.leaving : -1;
+#if PORTAL_LEGS_FREE
+    /* The host proved that no leg after a camera ray's first one meets a portal (engine/portal_legs.py) and the
+     * frame has no other rays: the later legs' portal search is compiled out. */
+    if (!tiled) {
+        ev.portal = no_event();
+    } else
+#endif
 #if VIEW_TILES && PORTAL_TREE
     if (tiled) {
         ViewTile list = VIEW_TILE(tile);
@@ -293,6 +335,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
 #endif
         if (walk) {
             do {
+                PORTAL_LEG_LIST(kind, ev)
                 ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
                 ev = leg_events(SCENE_PASS ray TILED_ARG(false, 0));
                 kind = leg_event_kind(ev, none, ray.o_len);
@@ -301,6 +344,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         }
 #else
         if (pending) {
+            PORTAL_LEG_LIST(kind, ev)
             ray = cross_event(SCENE_PASS ray, kind, ev, sigma_lo, sigma_hi);
             ev = leg_events(SCENE_PASS ray TILED_ARG(false, 0));
         }
@@ -351,9 +395,10 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         mesh.instance = -1;
         mesh.triangle = -1;
         if (search) {
-            /* A camera ray's first leg (no event crossed yet) takes the tile's instances, nearest first. */
+            /* A camera ray's first leg (no event crossed yet) takes the tile's instances, nearest first; with
+             * PORTAL_LEGS the leg after its first portal takes that portal's list for the tile too. */
             mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS
-                                    TILE_LIST_ARG(tile_first, tiled && ray.n == 0 ? tile_count : -1));
+                                    TILE_LIST_ARG(tile_first, tiled && TILE_LEG(ray.n) ? tile_count : -1));
         }
 #if HAS_SPACE
         kind = leg_event_kind(ev, mesh, ray.o_len);

@@ -123,16 +123,18 @@ def test_the_lists_alone_give_the_trees_frames(backend_factory, backend_name, pr
         scene.close()
 
 
-def default_tiles_used(backend, scene) -> bool:
-    """Whether the backend's frame reads the instances' lists as it chooses, asked nothing."""
-    tiles = frame_tiles(backend, scene, {})
+def default_tiles_used(backend, scene, legs: bool = True) -> bool:
+    """Whether the backend's frame reads the instances' lists as it chooses, asked nothing (or, ``legs`` False,
+    only for the portal legs off)."""
+    tiles = frame_tiles(backend, scene, {} if legs else {"PORTAL_LEGS": 0})
     return tiles is not None and tiles.instances
 
 
 def test_glsl_lists_stay_off_beside_a_box_or_looped_portals(backend_factory):
     """By default GLSL lists instances in Euclidean frames and beside the portal tree over a deep instance tree
     only: beside boxes, a few (looped) portals or a shallow tree the lists' second copy of the instance code
-    costs every llvmpipe lane more than it saves."""
+    costs every llvmpipe lane more than it saves (beside a few portals the portal legs' lists may serve alone,
+    tests/backends/test_portal_leg_frames.py)."""
     backend = backend_factory("glsl", "f32")
     scene = many_instances(3, INSTANCE_TILE_MIN_BESIDE - 8)
     scene.set_camera((0.0, 1.8, 12.0), look_at=(0.0, 1.0, 0.0))
@@ -141,7 +143,9 @@ def test_glsl_lists_stay_off_beside_a_box_or_looped_portals(backend_factory):
         assert default_tiles_used(backend, scene)
         scene.add_portal_pair("pa", "pb", a=dict(position=(-3.0, 1.5, 4.0)), b=dict(position=(40.0, 1.5, 4.0)))
         render(backend, scene, SIZE)
-        assert not backend._space["PORTAL_TREE"] and not default_tiles_used(backend, scene)
+        assert not backend._space["PORTAL_TREE"] and not default_tiles_used(backend, scene, legs=False)
+        tiles = frame_tiles(backend, scene, {})  # ... unless the portal legs' lists serve every search alone
+        assert tiles is not None and tiles.portal_legs and tiles.instances_only
         for k in range(12):  # enough portals for their tree
             scene.add_portal_pair(f"qa{k}", f"qb{k}", a=dict(position=(k - 6.0, 1.5, 2.0), scale=(0.3, 0.3, 1.0)),
                                   b=dict(position=(k - 6.0, 1.5, 60.0), scale=(0.3, 0.3, 1.0)))  # fmt: skip
