@@ -14,13 +14,13 @@ virtual distance less D (grown for rounding) bounds it below and the kernels' br
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from engine.camera_view import CameraView, boxes_seen, seen_instances, view_planes
 from engine.tlas_wide import TlasLanes
-from engine.view_tiles import KERNEL_PAD, leaf_tiles, tile_rows
+from engine.view_tiles import KERNEL_PAD, PortalLegs, leaf_tiles, tile_rows
 
 #: Relative growth of the exit quad's farthest corner, on top of :data:`engine.view_tiles.KERNEL_PAD`'s.
 FAR_MARGIN = 1e-3
@@ -37,19 +37,6 @@ ROTATION_TOLERANCE = 1e-5
 _QUAD = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
 #: Which of a box's 8 corners take hi, per axis.
 _PICK = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)
-
-
-@dataclass(frozen=True)
-class PortalLegs:
-    """What the portal legs' lists of a frame say: per slot (a portal its first legs can cross, with a
-    virtual camera) the portal row, its tile rect ``(x0, y0, x1, y1)``, and per tile of the rect (row-major)
-    the instance rows, their bounds and counts (:func:`engine.view_tiles.tile_rows`' form); and whether
-    every second leg has its list and meets no portal (no third leg: the tree is not needed)."""
-
-    rows: np.ndarray
-    rects: np.ndarray
-    lists: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
-    complete: bool
 
 
 def quad_corners(w2l: np.ndarray) -> np.ndarray:

@@ -14,16 +14,13 @@ tree's one. The table (:data:`engine.layout.VIEW_TILE`) is CSR: a header row per
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
 import numpy as np
 
 from engine import layout
 from engine.camera_view import CameraView, seen_instances, seen_leaves
 from engine.tlas_wide import TlasLanes
-
-if TYPE_CHECKING:
-    from engine.portal_legs import PortalLegs
 
 #: log2 of a tile's side in pixels: 8 x 8, the GLSL backend's work-group, whose 4 x 2 lane blocks each lie in
 #: one tile (llvmpipe runs a block's 8 lanes as one vector: one list for them all).
@@ -40,6 +37,19 @@ RANGE_MARGIN = 1e-3
 NEAR_MARGIN = 1e-3
 #: A corner nearer the camera plane than this (times max(1, its distance)) makes its leaf cover every tile.
 NEAR_PLANE = 1e-3
+
+
+@dataclass(frozen=True)
+class PortalLegs:
+    """What the portal legs' lists of a frame say: per slot (a portal its first legs can cross, with a
+    virtual camera) the portal row, its tile rect ``(x0, y0, x1, y1)``, and per tile of the rect (row-major)
+    the instance rows, their bounds and counts (:func:`engine.view_tiles.tile_rows`' form); and whether
+    every second leg has its list and meets no portal (no third leg: the tree is not needed)."""
+
+    rows: np.ndarray
+    rects: np.ndarray
+    lists: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+    complete: bool
 
 
 def tile_grid(width: int, height: int, log2: int = TILE_LOG2) -> tuple[int, int]:

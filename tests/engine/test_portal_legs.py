@@ -16,9 +16,9 @@ from backends.reference.directions import affine_points, linear_vectors
 from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, scene_camera
 from engine.packing import ScenePacker
-from engine.portal_legs import PortalLegs, portal_legs
+from engine.portal_legs import portal_legs
 from engine.tlas_wide import TlasLanes
-from engine.view_tiles import tile_grid, view_tiles
+from engine.view_tiles import PortalLegs, tile_grid, view_tiles
 
 
 def second_legs(
