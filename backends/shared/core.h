@@ -75,7 +75,8 @@
  *   SKIP_CLEAR_SEARCH  1: skip the mesh searches the host's clearances prove empty (box rows' rot0.w,
  *                      the camera row's lens.z with CAMERA_CLEAR_SEARCH 1); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
- *                      (engine/box_clearance.py); 0 for A/B only
+ *                      (engine/box_clearance.py); OWN_BOX_FACES 1: the face search on a leg inside a
+ *                      box alone is that box's own faces, not the tree's walk; 0 for A/B only
  *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
  *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
  *                      gap test true for every face event of the frame, so the containing_box loop after a face
@@ -172,6 +173,9 @@
 #endif
 #ifndef FACE_NEXT_BOX
 #define FACE_NEXT_BOX 1
+#endif
+#ifndef OWN_BOX_FACES
+#define OWN_BOX_FACES 1
 #endif
 #ifndef CAMERA_CLEAR_SEARCH
 #define CAMERA_CLEAR_SEARCH 1

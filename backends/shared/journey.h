@@ -162,7 +162,8 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray TILED_DECL)
     ev.t_cut = ev.portal.t;
 #endif
 #if HAS_ABERRATIONS
-    ev.face = nearest_box_face(SCENE_PASS ray.o, ray.r, ev.t_min, ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
+    ev.face = box_face_from(SCENE_PASS ray.aberration, ray.o, ray.r, ray.o_len, ray.r_len, ev.t_min,
+                            ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
     if (ev.face.t < REAL_MAX) {
         real tie = tie_window(ray.o_len, ev.face.t);
         ev.t_cut = min(ev.t_cut, ev.face.t + tie);

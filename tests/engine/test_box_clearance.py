@@ -4,7 +4,7 @@ The host proves a mesh search empty (a segment inside a box clear of every insta
 nearer than the camera's clearance) and a box look-up decided by the crossed face (a box farther than the
 nudge from every other box). Here: the bounds are lower bounds and vanish where they must (overlapping
 boxes, an instance moved into a box, incrementally), and the frames are bit-identical with the shortcuts
-on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, the box code a frame compiles out: FACE_NEXT_ONLY,
+on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, OWN_BOX_FACES, the box code a frame compiles out: FACE_NEXT_ONLY,
 CAMERA_BOX_ENTRY, and the loops' compiled-in counts PORTAL_COUNT, BOX_COUNT) in every fast backend, f32 and f64.
 """
 
@@ -21,6 +21,7 @@ from test_parity_aberrations import camera_in_metric, grazing_and_touching, mixe
 from test_parity_portals import portal_in_aberrations
 
 from aberrant.bench.scenes import ten_boxes, ten_boxes_aberration, ten_boxes_portals
+from aberrant.bench.space import space_scene
 from backends.base import AOVS, Frame
 from backends.shared import UploadedScene
 from components import Transform
@@ -37,8 +38,8 @@ FAST = [
     pytest.param("opencl", "f64", id="opencl-f64"),
 ]
 OFF = {
-    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1,
-    "PORTAL_COUNT": -1, "BOX_COUNT": -1,
+    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "OWN_BOX_FACES": 0, "FACE_NEXT_ONLY": 0,
+    "CAMERA_BOX_ENTRY": 1, "PORTAL_COUNT": -1, "BOX_COUNT": -1,
 }  # fmt: skip
 
 
@@ -134,11 +135,12 @@ def scenes(folder: Path) -> dict[str, object]:
         "mixed-overlap": mixed_overlap,
         "grazing-and-touching": grazing_and_touching,
         "portal-in-aberrations": portal_in_aberrations,
+        "boxes-in-view": lambda: space_scene("boxes", "in", 64),  # the box tree, every box alone
     }
 
 
 @pytest.mark.parametrize("case", ["bench-aberration", "bench-portals", "mixed-overlap", "grazing-and-touching",
-                                  "portal-in-aberrations"])  # fmt: skip
+                                  "portal-in-aberrations", "boxes-in-view"])  # fmt: skip
 @pytest.mark.parametrize(("backend_name", "precision"), FAST)
 def test_shortcuts_are_bit_identical(tmp_path, backend_factory, backend_name, precision, case):
     backend = backend_factory(backend_name, precision)
