@@ -109,10 +109,11 @@ class GlslBackend(shared.UploadedScene, Backend):
     """Traces with the shared core in an OpenGL 4.3 compute shader (moderngl)."""
 
     name: ClassVar[str] = "glsl"
-    #: Loops over up to 8 portals and 4 boxes: interleaved A/B, 320x320, 30 boxes in view, CPU time: with 8
-    #: portals in view the tree costs 1.19x the loop (1.00x hidden behind a wall), with 16 0.99x (0.89x); with
-    #: 8 boxes 1.05x (0.90x), with 16 0.85x (0.79x).
-    tree_min: ClassVar[tuple[int, int]] = (8, 4)
+    #: Loops over up to 4 portals and 4 boxes: interleaved A/B, 320x320, CPU time: with 8 portals in view
+    #: before 30 boxes the tree (and its view tiles) costs 0.80x the loop, the house demo's 8 doors 0.90x, 4
+    #: portals in view 0.93-0.98x but 4 beside a box 1.06x (portal_in_aberration); with 8 boxes 1.05x (0.90x
+    #: hidden behind a wall), with 16 0.85x (0.79x).
+    tree_min: ClassVar[tuple[int, int]] = (4, 4)
     precisions: ClassVar[tuple[Precision, ...]] = ("f32", "f64")
     camera_relative: bool = True
     #: Compact records: a visit loads 2 texels instead of 4 (llvmpipe gathers texels at a bounded rate).
