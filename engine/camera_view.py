@@ -137,10 +137,14 @@ def boxes_seen(planes: np.ndarray, apex: np.ndarray, lo: np.ndarray, hi: np.ndar
     """Which boxes lo/hi (n, 3) are not wholly outside one of the pyramid's planes (apex: the camera)."""
     # Twice each box's corner furthest along each normal, relative to the apex, as centre and half extent:
     # (lo + hi) . n + (hi - lo) . |n|, two small products (half the time of the corners picked per plane).
+    # The extremes over the 3 axes and 4 planes taken column by column: elementwise over the boxes, not a
+    # short row per box.
     lo, hi = lo - apex, hi - apex
-    reach = np.maximum(np.abs(lo), np.abs(hi)).max(axis=1)
-    far = ((lo + hi) @ planes.T + (hi - lo) @ np.abs(planes).T).min(axis=1)
-    return far >= (-2.0 * VIEW_MARGIN) * np.maximum(1.0, reach)
+    size = np.maximum(np.abs(lo), np.abs(hi))
+    reach = np.maximum(np.maximum(size[:, 0], size[:, 1]), size[:, 2])
+    far = (lo + hi) @ planes.T + (hi - lo) @ np.abs(planes).T
+    nearest = np.minimum(np.minimum(far[:, 0], far[:, 1]), np.minimum(far[:, 2], far[:, 3]))
+    return nearest >= (-2.0 * VIEW_MARGIN) * np.maximum(1.0, reach)
 
 
 def seen_leaves(view: CameraView, aspect: float, origin: np.ndarray, nodes: np.ndarray, root: int) -> np.ndarray:
