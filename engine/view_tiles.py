@@ -124,11 +124,14 @@ def tile_rows(
     w = np.maximum(ranges[:, 2] - ranges[:, 0] + 1, 0)
     h = np.maximum(ranges[:, 3] - ranges[:, 1] + 1, 0)
     area = w * h
+    # Each (leaf, tile) entry: its leaf, its place in the leaf's rect (row-major) and so its tile, with one
+    # division for both coordinates and each leaf's values repeated rather than gathered per entry.
     leaf = np.repeat(np.arange(len(rows)), area)
     local = np.arange(len(leaf)) - np.repeat(np.cumsum(area) - area, area)
-    width = w[leaf]
-    tile = (ranges[leaf, 1] + local // width) * tiles_x + ranges[leaf, 0] + local % width
-    order = np.argsort(tile, kind="stable")  # the leaves' order, nearest first, within each tile
+    down, across = np.divmod(local, np.repeat(w, area))
+    tile = np.repeat(ranges[:, 1] * tiles_x + ranges[:, 0], area) + down * tiles_x + across
+    # The leaves' order, nearest first, within each tile: a stable sort, a radix sort on 16-bit keys.
+    order = np.argsort(tile.astype(np.uint16) if tiles <= 1 << 16 else tile, kind="stable")
     leaf = leaf[order]
     return rows[leaf], distance[leaf], np.bincount(tile, minlength=tiles)
 
