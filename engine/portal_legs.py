@@ -20,7 +20,7 @@ import numpy as np
 
 from engine.camera_view import CameraView, boxes_seen, seen_instances, view_planes
 from engine.tlas_wide import TlasLanes
-from engine.view_tiles import KERNEL_PAD, PortalLegs, leaf_tiles, tile_rows
+from engine.view_tiles import CORNER_PICK, KERNEL_PAD, PortalLegs, leaf_tiles, tile_rows
 
 #: Relative growth of the exit quad's farthest corner, on top of :data:`engine.view_tiles.KERNEL_PAD`'s.
 FAR_MARGIN = 1e-3
@@ -36,7 +36,7 @@ ROTATION_TOLERANCE = 1e-5
 
 _QUAD = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
 #: Which of a box's 8 corners take hi, per axis.
-_PICK = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)
+_PICK = CORNER_PICK > 0.0
 
 
 def quad_corners(w2l: np.ndarray) -> np.ndarray:

@@ -38,7 +38,7 @@ NEAR_MARGIN = 1e-3
 #: A corner nearer the camera plane than this (times max(1, its distance)) makes its leaf cover every tile.
 NEAR_PLANE = 1e-3
 #: (8, 3): which axes of a box's 8 corners take its hi bound (1) over its lo one (0).
-_CORNER_PICK = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], np.float64)
+CORNER_PICK = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], np.float64)
 
 
 @dataclass(frozen=True)
@@ -80,9 +80,9 @@ def leaf_tiles(
     # small product per component.
     rotation = view.rotation
     base, extent = rotation.T @ lo, hi - lo
-    right = base[0] + _CORNER_PICK @ (extent * rotation[:, 0:1])
-    up = base[1] + _CORNER_PICK @ (extent * rotation[:, 1:2])
-    depth = -(base[2] + _CORNER_PICK @ (extent * rotation[:, 2:3]))
+    right = base[0] + CORNER_PICK @ (extent * rotation[:, 0:1])
+    up = base[1] + CORNER_PICK @ (extent * rotation[:, 1:2])
+    depth = -(base[2] + CORNER_PICK @ (extent * rotation[:, 2:3]))
     reach = np.maximum(np.abs(lo), np.abs(hi))
     size = np.sqrt(reach[0] ** 2 + reach[1] ** 2 + reach[2] ** 2)  # at least each corner's distance
     near = depth.min(axis=0) <= NEAR_PLANE * np.maximum(1.0, size)

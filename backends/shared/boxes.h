@@ -103,22 +103,28 @@ FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int
     return best;
 }
 
-/* nearest_box_face on a leg inside box b (the ray's active box, -1 for none): a box farther than the nudge
- * at its exit from every other box (its gap, from the host) is the only one with a face on the segment to that
- * exit or within the rounding of it, so its own faces are the search's answer, the one the tree's walk finds.
- * Else that search. Beside the tree only: against the loop over a few boxes, llvmpipe pays for both (one box
- * filling the view: 1.05x the time). */
+/* Whether the box of a face event (face) lies farther than twice the nudge at the face from every other box
+ * (its gap, from the host): no other box then holds a point within the nudge of the face, nor has a face
+ * within the rounding of it. FACE_NEXT_ONLY: the host proved it for every face of the frame. */
+bool box_alone(Event face, real o_len, real r_len)
+{
+#if FACE_NEXT_ONLY
+    return true;
+#else
+    return face.gap > REAL(2.0f) * NUDGE_RELATIVE * max(REAL(1.0f), o_len + face.t) * r_len;
+#endif
+}
+
+/* nearest_box_face on a leg inside box b (the ray's active box, -1 for none): a box alone at its exit is the
+ * only one with a face on the segment to that exit or within the rounding of it, so its own faces are the
+ * search's answer, the one the tree's walk finds. Else that search. Beside the tree only: against the loop
+ * over a few boxes, llvmpipe pays for both (one box filling the view: 1.05x the time). */
 FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len, real r_len, real t_min, int skip)
 {
 #if OWN_BOX_FACES && BOX_TREE
     if (b >= 0) {
         Event own = box_faces(SCENE_PASS no_event(), b, o, r, t_min, skip);
-#if FACE_NEXT_ONLY
-        /* The host proved the gap test true for every face of the frame (box_after_face). */
-        if (own.t < REAL_MAX) {
-#else
-        if (own.t < REAL_MAX && own.gap > REAL(2.0f) * NUDGE_RELATIVE * max(REAL(1.0f), o_len + own.t) * r_len) {
-#endif
+        if (own.t < REAL_MAX && box_alone(own, o_len, r_len)) {
             return own;
         }
     }
@@ -199,7 +205,7 @@ int box_after_face(SCENE_DECL real3 o, real3 r, real o_len, real r_len, Event fa
     return face.t + nudge <= face.far ? face.row / BOX_FACES : -1;
 #else
 #if FACE_NEXT_BOX
-    if (face.gap > REAL(2.0f) * nudge * r_len) {
+    if (box_alone(face, o_len, r_len)) {
         return face.t + nudge <= face.far ? face.row / BOX_FACES : -1;
     }
 #endif
