@@ -186,6 +186,11 @@
 #ifndef FACE_NEXT_ONLY
 #define FACE_NEXT_ONLY 0
 #endif
+/* A camera ray's first leg searched with its tile's list before the event loop (journey.h), where later legs
+ * walk the tree; 0 searches it in the loop (A/B, and tests that the frames are the same). */
+#ifndef FIRST_LEG_APART
+#define FIRST_LEG_APART (HAS_SPACE && INSTANCE_TILES && !INSTANCE_TILES_ONLY)
+#endif
 #ifndef SPACE_WALK
 #define SPACE_WALK 1
 #endif

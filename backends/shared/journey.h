@@ -315,7 +315,30 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
      * would run the crossing code once more for nothing. */
     bool pending = false;
     int kind = EVENT_NONE;
-    for (int pass = 0; pass <= MAX_EVENTS; ++pass) {
+    bool ended = false;
+#if FIRST_LEG_APART
+    /* A camera ray's first leg whose tile lists its instances is searched here, with the list alone, and the
+     * event loop's searches walk the tree alone (but the portal legs' lists): llvmpipe runs both sides of a
+     * branch masked, so a search that held both ran the list's copy of the instance code and the tree's at
+     * every pass. The same pass as the loop's (no event yet: nothing pending, no walk, no limit reached). */
+    if (tiled && ev.search && tile_count >= 0 && dot(ray.r, ray.r) > REAL(0.0f) && SETTINGS.counts.x != 0) {
+#if HAS_SHADOWS
+        real t_stop = TO_REAL(-F_INF);
+#endif
+        MeshHit mesh = tile_mesh(SCENE_PASS ray.o, ray.r, ev.t_min, ev.t_cut, tile_first, tile_count STOP_PASS);
+        kind = leg_event_kind(ev, mesh, ray.o_len);
+        if (kind == EVENT_MESH) {
+            hit = mesh;
+            trip.end = END_MESH;
+        }
+        pending = kind == EVENT_ABERRATION || kind == EVENT_PORTAL;
+        ended = !pending;
+    }
+#define LOOP_LIST_LEG(n) (PORTAL_LEGS != 0 && (n) == 1)
+#else
+#define LOOP_LIST_LEG(n) TILE_LEG(n)
+#endif
+    for (int pass = 0; pass <= MAX_EVENTS && !ended; ++pass) {
 #if HAS_SPACE
 #if SPACE_WALK
         /* The pending event, then the legs the host's clearances prove free of meshes, crossed without the mesh
@@ -399,7 +422,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
             /* A camera ray's first leg (no event crossed yet) takes the tile's instances, nearest first; with
              * PORTAL_LEGS the leg after its first portal takes that portal's list for the tile too. */
             mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, t_min, t_cut STOP_PASS
-                                    TILE_LIST_ARG(tile_first, tiled && TILE_LEG(ray.n) ? tile_count : -1));
+                                    TILE_LIST_ARG(tile_first, tiled && LOOP_LIST_LEG(ray.n) ? tile_count : -1));
         }
 #if HAS_SPACE
         kind = leg_event_kind(ev, mesh, ray.o_len);

@@ -16,13 +16,15 @@ from backends.shared import INSTANCE_TILE_MIN, INSTANCE_TILE_MIN_BESIDE
 from engine.camera_view import pack_camera, scene_camera
 
 #: Frames with the instances' lists, without them, with every tile of over 3 on the tree (where the tree is
-#: compiled in), and with the tree compiled in where the lists could serve alone.
+#: compiled in), with the tree compiled in where the lists could serve alone, and with the first leg's list
+#: searched inside the event loop (beside portals and boxes) rather than before it.
 ON = {"INSTANCE_TILES": 1}
 VARIANTS: tuple[dict[str, int], ...] = (
     ON,
     {"INSTANCE_TILES": 0},
     {**ON, "INSTANCE_TILE_MAX": 3},
     {**ON, "INSTANCE_TILES_ONLY": 0, "INSTANCE_TILE_MAX": 3},
+    {**ON, "FIRST_LEG_APART": 0},
 )
 
 
