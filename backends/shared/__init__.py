@@ -50,6 +50,7 @@ TRACER_FILES: tuple[str, ...] = (
     "space.h",
     "boxes.h",
     "portals.h",
+    "legs.h",
     "journey.h",
     "shade.h",
     "pixel.h",

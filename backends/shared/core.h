@@ -9,6 +9,7 @@
  *   space.h       what boxes and portals share: vector rules, the tie rule, their trees (space_nodes)
  *   boxes.h       aberration boxes: faces, the box holding a point, transitions
  *   portals.h     portals: the nearest quad, teleports
+ *   legs.h        one leg: its portal and box-face events, the first of them, the crossing to the next leg
  *   journey.h     primary rays and the event loop (camera and shadow rays alike)
  *   shade.h       the colour of a hit, its lights and their shadow rays
  *   pixel.h       trace_pixel, the kernels' entry point
