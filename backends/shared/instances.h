@@ -85,6 +85,13 @@ FORCE_INLINE MeshHit tile_mesh(SCENE_DECL real3 o, real3 d, real t_min, real t_m
 #define TILE_LIST_ARG(first, count)
 #endif
 
+/* Whether a mesh search along d can find anything: a zero or NaN direction hits nothing, nor does a scene of
+ * no instances. */
+FORCE_INLINE bool meshes_reachable(SCENE_DECL real3 d)
+{
+    return dot(d, d) > REAL(0.0f) && SETTINGS.counts.x != 0;
+}
+
 /* The nearest triangle hit with t_min < t <= t_max over every instance, or with shadows the first one
  * found nearer than t_stop (core.h, SEARCH_STOP). USE_TLAS: the instances
  * a ray can reach come from the top-level tree (tlas_nodes, engine/tlas.py; TLAS_WIDTH 4 or 8: its
@@ -98,9 +105,8 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
     best.bary = R3S(0.0f);
     best.instance = -1;
     best.triangle = -1;
-    int count = SETTINGS.counts.x;
-    if (!(dot(d, d) > REAL(0.0f)) || count == 0) {
-        return best; /* a zero or NaN direction hits nothing */
+    if (!meshes_reachable(SCENE_PASS d)) {
+        return best;
     }
     real3 inv = safe_inverse(d);
 #if INSTANCE_TILES_ONLY
@@ -169,6 +175,7 @@ FORCE_INLINE MeshHit nearest_mesh(SCENE_DECL real3 o, real3 d, real t_min, real 
         }
     }
 #else
+    int count = SETTINGS.counts.x;
     for (int i = 0; i < count; ++i) {
         real2 h = slab(o, inv, INSTANCE(i).bounds_min.xyz, INSTANCE(i).bounds_max.xyz);
         if (slab_hit(h, t_min, best.t)) {

@@ -106,7 +106,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
      * event loop's searches walk the tree alone (but the portal legs' lists): llvmpipe runs both sides of a
      * branch masked, so a search that held both ran the list's copy of the instance code and the tree's at
      * every pass. The same pass as the loop's (no event yet: nothing pending, no walk, no limit reached). */
-    if (tiled && ev.search && tile_count >= 0 && dot(ray.r, ray.r) > REAL(0.0f) && SETTINGS.counts.x != 0) {
+    if (tiled && ev.search && tile_count >= 0 && meshes_reachable(SCENE_PASS ray.r)) {
 #if HAS_SHADOWS
         real t_stop = TO_REAL(-F_INF);
 #endif
