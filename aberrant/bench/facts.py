@@ -19,13 +19,27 @@ from engine.scene import Scene
 
 
 def _cpu_model() -> str:
+    """The CPU's model name, with its family, model and widest vector extension where /proc/cpuinfo says:
+    cloud machines of one name ("AMD EPYC") differ by generation, and the tracers' speed with them."""
+    fields: dict[str, str] = {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
+            key, _, value = line.partition(":")
+            key = key.strip()
+            if not key and fields:
+                break  # the first processor's block is enough
+            fields.setdefault(key, value.strip())
     except OSError:
         pass
-    return platform.processor() or platform.machine()
+    name = fields.get("model name") or platform.processor() or platform.machine()
+    return f"{name} ({cpu_generation(fields)})" if "cpu family" in fields else name
+
+
+def cpu_generation(fields: dict[str, str]) -> str:
+    """'family F model M, V' from one processor's /proc/cpuinfo fields, V the widest of AVX-512, AVX2, SSE."""
+    flags = set(fields.get("flags", "").split())
+    vector = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
+    return f"family {fields.get('cpu family', '?')} model {fields.get('model', '?')}, {vector}"
 
 
 def machine_info(backends: list[str], probes: dict[str, str | None]) -> dict[str, Any]:
