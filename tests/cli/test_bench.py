@@ -120,15 +120,15 @@ def test_sweeps_have_unique_labels_and_reject_unknown_names():
         check_sweeps(["colour"])
 
 
-# --- the reference cache ------------------------------------------------------------------------------------
-
-
 def test_the_machine_line_names_the_cpu_generation_and_its_widest_vectors():
     """Machines of one model name ("AMD EPYC") differ by generation, and the report must tell them apart."""
     zen4 = {"cpu family": "25", "model": "17", "flags": "fpu sse2 avx2 avx512f avx512bw"}
     assert cpu_generation(zen4) == "family 25 model 17, AVX-512"
     assert cpu_generation({"cpu family": "25", "model": "1", "flags": "sse2 avx avx2"}) == "family 25 model 1, AVX2"
     assert cpu_generation({"cpu family": "6", "model": "85", "flags": "sse2"}) == "family 6 model 85, SSE"
+
+
+# --- the reference cache ------------------------------------------------------------------------------------
 
 
 def test_reference_cache_renders_once_then_reads_the_disk(tmp_path, monkeypatch):
