@@ -52,6 +52,8 @@
 
 /* --- helpers ------------------------------------------------------------------------ */
 #define ABS(x) abs(x)
+/* v / |v| for a v that is neither zero nor near the range's ends (backends/shared/prelude_cl.h). */
+#define NORMALIZED(v) normalize(v)
 /* Component i (0, 1, 2) of a real3, i not a constant. */
 #define VIDX3(v, i) ((v)[i])
 /* No fused multiply-add in the expressions feeding this variable (watertight edge functions). */

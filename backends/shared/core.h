@@ -28,7 +28,8 @@
  *               without suffix, as a real: exact in double, e.g. REAL_C(1.0e-9))
  *   casts       TO_REAL TO_REAL3 (from float3) TO_FLOAT TO_FLOAT3 TO_INT TO_DOUBLE,
  *               AS_INT / AS_FLOAT (bit reinterpretation)
- *   helpers     ABS (float abs, scalar or vector), VIDX3(v, i) (component i of
+ *   helpers     ABS (float abs, scalar or vector), NORMALIZED(v) (v / |v| for v neither zero
+ *               nor near the range's ends), VIDX3(v, i) (component i of
  *               a real3), PRECISE (no fused multiply-add), FORCE_INLINE (before a
  *               function: always inline it; empty in GLSL), STRUCT_BEGIN/END
  *   scene       SCENE_DECL / SCENE_PASS (a first parameter carrying the tables,

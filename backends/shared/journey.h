@@ -34,7 +34,7 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
     real aspect = cam.lens.y;
     real x = (REAL(2.0f) * (TO_REAL(i) + cam.subpixel.x) / TO_REAL(cam.size.x) - REAL(1.0f)) * aspect * tan_half;
     real y = (REAL(1.0f) - REAL(2.0f) * (TO_REAL(j) + cam.subpixel.y) / TO_REAL(cam.size.y)) * tan_half;
-    real3 cam_dir = normalize(R3(x, y, -1.0f));
+    real3 cam_dir = NORMALIZED(R3(x, y, -1.0f));
     real3 d = cam_dir.x * cam.right.xyz + cam_dir.y * cam.up.xyz + cam_dir.z * cam.back.xyz;
     return start_ray(cam.position.xyz, d);
 }
