@@ -87,13 +87,23 @@ FORCE_INLINE Event box_faces(SCENE_DECL Event best, int b, real3 o, real3 r, rea
 /* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
  * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
  * lower row, then the entry face. BOX_TREE: the boxes the ray enters, from the tree; else every box. */
+#if BOX_TREE
+/* The tree's part of nearest_box_face after best: the faces crossed with t_face < t of the boxes whose leaves the
+ * ray enters within (t_min, best.t], t_min >= t_face where no other box can have a face nearer (box_face_from). */
+FORCE_INLINE Event tree_box_faces(SCENE_DECL Event best, real3 o, real3 r, real t_min, real t_face, int skip)
+{
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.y, SETTINGS.space_roots.w)
+    best = box_faces(SCENE_PASS best, leaf, o, r, t_face, skip);
+    SPACE_LEAVES_END
+    return best;
+}
+#endif
+
 FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
     Event best = no_event();
 #if BOX_TREE
-    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.y, SETTINGS.space_roots.w)
-    best = box_faces(SCENE_PASS best, leaf, o, r, t_min, skip);
-    SPACE_LEAVES_END
+    best = tree_box_faces(SCENE_PASS best, o, r, t_min, t_min, skip);
 #else
     int count = BOX_ROWS;
     for (int b = 0; b < count; ++b) {
@@ -119,7 +129,8 @@ bool box_alone(Event face, real o_len, real r_len)
  * only one with a face on the segment to that exit or within the rounding of it, so its own faces are the
  * search's answer, the one the tree's walk finds. Else that search. Beside the tree only: against the loop
  * over a few boxes, llvmpipe pays for both (one box filling the view: 1.05x the time). */
-FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len, real r_len, real t_min, int skip)
+FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len, real r_len, real t_from, real t_min,
+                                 int skip)
 {
 #if OWN_BOX_FACES && BOX_TREE
     if (b >= 0) {
@@ -129,7 +140,23 @@ FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len,
         }
     }
 #endif
+#if LEFT_BOX_GAP && BOX_TREE
+    /* A leg that leaves a face of box `left` starts on it (at t_from), and every other box lies at least left's
+     * gap away (from the host, a lower bound of the distance): none has a face before t_from + gap / |r|, less
+     * twice the nudge for the rounding of the start point. So left's own faces, then the tree's walk from there:
+     * after a ray leaves a box, the walk no longer descends to the leaves around the one it left. */
+    Event best = no_event();
+    real reach = t_min;
+    if (skip >= 0) {
+        int left = skip / BOX_FACES;
+        best = box_faces(SCENE_PASS best, left, o, r, t_min, skip);
+        real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t_from);
+        reach = max(t_min, t_from + ABERRATION(left).rot1.w / r_len - REAL(2.0f) * nudge);
+    }
+    return tree_box_faces(SCENE_PASS best, o, r, reach, t_min, skip);
+#else
     return nearest_box_face(SCENE_PASS o, r, t_min, skip);
+#endif
 }
 
 /* Whether box b's closed unit box holds p. */

@@ -78,7 +78,10 @@
  *                      the camera row's lens.z with CAMERA_CLEAR_SEARCH 1); FACE_NEXT_BOX 1: the
  *                      box after a face of a box alone (rot1.w) from the face, not the loop
  *                      (engine/box_clearance.py); OWN_BOX_FACES 1: the face search on a leg inside a
- *                      box alone is that box's own faces, not the tree's walk; 0 for A/B only
+ *                      box alone is that box's own faces, not the tree's walk; 0 for A/B only;
+ *                      LEFT_BOX_GAP 1: a leg leaving a box's face walks the box tree only from that box's
+ *                      gap on (boxes.h, box_face_from; OpenCL's default, 0 on GLSL, where llvmpipe runs
+ *                      the left box's faces for every lane)
  *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
  *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
  *                      gap test true for every face event of the frame, so the containing_box loop after a face
@@ -192,6 +195,13 @@
  * walk the tree; 0 searches it in the loop (A/B, and tests that the frames are the same). */
 #ifndef FIRST_LEG_APART
 #define FIRST_LEG_APART (HAS_SPACE && INSTANCE_TILES && !INSTANCE_TILES_ONLY)
+#endif
+#ifndef LEFT_BOX_GAP
+#ifdef __OPENCL_VERSION__
+#define LEFT_BOX_GAP 1
+#else
+#define LEFT_BOX_GAP 0
+#endif
 #endif
 #ifndef SPACE_WALK
 #define SPACE_WALK 1

@@ -126,7 +126,7 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray TILED_DECL)
     ev.t_cut = ev.portal.t;
 #endif
 #if HAS_ABERRATIONS
-    ev.face = box_face_from(SCENE_PASS ray.aberration, ray.o, ray.r, ray.o_len, ray.r_len, ev.t_min,
+    ev.face = box_face_from(SCENE_PASS ray.aberration, ray.o, ray.r, ray.o_len, ray.r_len, ray.t_from, ev.t_min,
                             ray.leaving_kind == EVENT_ABERRATION ? ray.leaving : -1);
     if (ev.face.t < REAL_MAX) {
         real tie = tie_window(ray.o_len, ev.face.t);

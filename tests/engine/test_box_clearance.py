@@ -4,8 +4,9 @@ The host proves a mesh search empty (a segment inside a box clear of every insta
 nearer than the camera's clearance) and a box look-up decided by the crossed face (a box farther than the
 nudge from every other box). Here: the bounds are lower bounds and vanish where they must (overlapping
 boxes, an instance moved into a box, incrementally), and the frames are bit-identical with the shortcuts
-on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, OWN_BOX_FACES, the box code a frame compiles out: FACE_NEXT_ONLY,
-CAMERA_BOX_ENTRY, and the loops' compiled-in counts PORTAL_COUNT, BOX_COUNT) in every fast backend, f32 and f64.
+on and off (SKIP_CLEAR_SEARCH, FACE_NEXT_BOX, OWN_BOX_FACES, LEFT_BOX_GAP, the box code a frame compiles out:
+FACE_NEXT_ONLY, CAMERA_BOX_ENTRY, and the loops' compiled-in counts PORTAL_COUNT, BOX_COUNT) in every fast
+backend, f32 and f64.
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ FAST = [
     pytest.param("opencl", "f64", id="opencl-f64"),
 ]
 OFF = {
-    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "OWN_BOX_FACES": 0, "FACE_NEXT_ONLY": 0,
-    "CAMERA_BOX_ENTRY": 1, "PORTAL_COUNT": -1, "BOX_COUNT": -1,
+    "SKIP_CLEAR_SEARCH": 0, "CAMERA_CLEAR_SEARCH": 0, "FACE_NEXT_BOX": 0, "OWN_BOX_FACES": 0, "LEFT_BOX_GAP": 0,
+    "FACE_NEXT_ONLY": 0, "CAMERA_BOX_ENTRY": 1, "PORTAL_COUNT": -1, "BOX_COUNT": -1,
 }  # fmt: skip
 
 
@@ -128,8 +129,26 @@ def test_an_instance_moved_into_a_box_clears_its_clearance_and_is_rendered(tmp_p
     scene.close()
 
 
+def boxes_in_a_row() -> Scene:
+    """Six metric boxes one behind another, a little apart, seen at an angle: rays leave one box and enter the
+    next a gap later (the box tree, its walk after each exit started past the gap)."""
+    scene = Scene("boxes-in-a-row")
+    scene.add_mesh("floor", "plane", scale=(20.0, 1.0, 20.0), checker=0.5)
+    scene.add_mesh("crate", "box", position=(0.3, 0.5, -9.0), scale=0.8)
+    for k in range(6):
+        scene.add_aberration(
+            f"lens{k}",
+            (0.2 * (k % 3) - 0.2, 0.15, -0.1),
+            position=(0.1 * k, 1.2, -1.0 - 1.1 * k),
+            scale=(3.0, 1.6, 1.0),
+        )
+    scene.set_camera((1.5, 1.6, 3.0), look_at=(0.0, 1.0, -8.0), fov_deg=60.0)
+    return scene
+
+
 def scenes(folder: Path) -> dict[str, object]:
     return {
+        "boxes-in-a-row": boxes_in_a_row,
         "bench-aberration": lambda: ten_boxes_aberration(folder),
         "bench-portals": lambda: ten_boxes_portals(folder),
         "mixed-overlap": mixed_overlap,
@@ -140,7 +159,7 @@ def scenes(folder: Path) -> dict[str, object]:
 
 
 @pytest.mark.parametrize("case", ["bench-aberration", "bench-portals", "mixed-overlap", "grazing-and-touching",
-                                  "portal-in-aberrations", "boxes-in-view"])  # fmt: skip
+                                  "portal-in-aberrations", "boxes-in-view", "boxes-in-a-row"])  # fmt: skip
 @pytest.mark.parametrize(("backend_name", "precision"), FAST)
 def test_shortcuts_are_bit_identical(tmp_path, backend_factory, backend_name, precision, case):
     backend = backend_factory(backend_name, precision)
