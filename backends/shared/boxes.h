@@ -84,9 +84,6 @@ FORCE_INLINE Event box_faces(SCENE_DECL Event best, int b, real3 o, real3 r, rea
     return best;
 }
 
-/* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
- * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
- * lower row, then the entry face. BOX_TREE: the boxes the ray enters, from the tree; else every box. */
 #if BOX_TREE
 /* The tree's part of nearest_box_face after best: the faces crossed with t_face < t of the boxes whose leaves the
  * ray enters within (t_min, best.t], t_min >= t_face where no other box can have a face nearer (box_face_from). */
@@ -99,6 +96,9 @@ FORCE_INLINE Event tree_box_faces(SCENE_DECL Event best, real3 o, real3 r, real 
 }
 #endif
 
+/* The nearest box face crossed with t_min < t (aberrations.nearest_box_faces): kind EVENT_ABERRATION,
+ * row = face id, t = REAL_MAX for none. The face being left (skip) never counts; ties go to the
+ * lower row, then the entry face. BOX_TREE: the boxes the ray enters, from the tree; else every box. */
 FORCE_INLINE Event nearest_box_face(SCENE_DECL real3 o, real3 r, real t_min, int skip)
 {
     Event best = no_event();
