@@ -133,8 +133,9 @@ FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len,
                                  int skip)
 {
 #if OWN_BOX_FACES && BOX_TREE
+    Event own = no_event();
     if (b >= 0) {
-        Event own = box_faces(SCENE_PASS no_event(), b, o, r, t_min, skip);
+        own = box_faces(SCENE_PASS own, b, o, r, t_min, skip);
         if (own.t < REAL_MAX && box_alone(own, o_len, r_len)) {
             return own;
         }
@@ -149,7 +150,12 @@ FORCE_INLINE Event box_face_from(SCENE_DECL int b, real3 o, real3 r, real o_len,
     real reach = t_min;
     if (skip >= 0) {
         int left = skip / BOX_FACES;
+#if OWN_BOX_FACES
+        /* Leaving a face of the box it is in (not alone), the ray has that box's faces already. */
+        best = left == b ? own : box_faces(SCENE_PASS best, left, o, r, t_min, skip);
+#else
         best = box_faces(SCENE_PASS best, left, o, r, t_min, skip);
+#endif
         real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t_from);
         reach = max(t_min, t_from + ABERRATION(left).rot1.w / r_len - REAL(2.0f) * nudge);
     }
