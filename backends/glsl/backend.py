@@ -55,6 +55,8 @@ OUTPUT_BINDINGS: dict[str, int] = {
     "instance": CAMERA_BINDING + 3,
     "events": CAMERA_BINDING + 4,
 }
+#: The storage buffer of the rays the first of a frame's two dispatches leaves to the second (SPLIT_PASS).
+QUEUE_BINDING = CAMERA_BINDING + 5
 #: Bytes per pixel and read-back dtype of each storage-buffer AOV.
 _OUTPUT_DTYPES: dict[str, np.dtype] = {
     "depth": np.dtype(np.float32),
@@ -166,6 +168,12 @@ class GlslBackend(shared.UploadedScene, Backend):
         #: ... and the instances' lists among them (README.md's table).
         self.instance_tiles = self.view_tiles
         self.portal_legs = self.view_tiles
+        #: Whether a frame whose camera rays' first legs take their instances from the tiles' lists beside
+        #: portals or boxes is traced in two dispatches (SPLIT_PASS in core.h): llvmpipe runs the event
+        #: loop's body for every SIMD lane even when none needs it, so the first dispatch finishes the rays
+        #: that end on their first leg and the second runs the loop for the others alone.
+        self.split_passes: bool = self.software
+        self._queue: moderngl.Buffer | None = None
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -314,6 +322,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             LANE_BLOCK_X=self.lane_block[0],
             LANE_BLOCK_Y=self.lane_block[1],
             CAMERA_BINDING=CAMERA_BINDING,
+            QUEUE_BINDING=QUEUE_BINDING,
             TABLES_IN_IMAGES=int(self.table_store == "image"),
             TABLE_WIDTH=TABLE_WIDTH,
             TABLE_WIDTH_LOG2=TABLE_WIDTH.bit_length() - 1,
@@ -351,6 +360,36 @@ class GlslBackend(shared.UploadedScene, Backend):
 
     # --- render ----------------------------------------------------------------------
 
+    def _split(self, defines: dict[str, int]) -> bool:
+        """Whether a frame of ``defines`` takes two dispatches: its camera rays' first legs searched apart
+        from the event loop (core.h's FIRST_LEG_APART), no shadow rays (they need the loop in the first
+        dispatch too); ``SPLIT_PASSES`` 0 in the extra defines: one dispatch (A/B, tests)."""
+        if not (self.split_passes and self.extra_defines.get("SPLIT_PASSES", 1)) or defines.get("HAS_SHADOWS"):
+            return False
+        space = defines.get("HAS_PORTALS") or defines.get("HAS_ABERRATIONS")
+        apart = space and defines.get("INSTANCE_TILES") and not defines.get("INSTANCE_TILES_ONLY")
+        return bool(defines.get("FIRST_LEG_APART", apart))
+
+    def _dispatch_split(self, defines: dict[str, int], width: int, height: int) -> None:
+        """The frame's two dispatches: every pixel's first leg, then the rays it queued (their count read
+        back in between: a few bytes, and the second dispatch's size)."""
+        first = self._program({**defines, "SPLIT_PASS": 1})
+        second = self._program({**defines, "SPLIT_PASS": 2})
+        ctx = self._context()
+        need = 16 + 4 * width * height
+        if self._queue is None or self._queue.size < need:
+            if self._queue is not None:
+                self._queue.release()
+            self._queue = ctx.buffer(reserve=need)
+        self._queue.write(bytes(4))
+        self._queue.bind_to_storage_buffer(QUEUE_BINDING)
+        gx, gy = self.workgroup
+        first.run(math.ceil(width / gx), math.ceil(height / gy), 1)
+        ctx.memory_barrier()
+        queued = int(np.frombuffer(self._queue.read(4), np.uint32)[0])
+        if queued:
+            second.run(math.ceil(queued / (gx * gy)), 1, 1)
+
     def _ensure_outputs(self, width: int, height: int, aovs: Sequence[str]) -> None:
         """(Re)allocate the colour texture and the requested AOV buffers only when the size changes."""
         ctx = self._context()
@@ -381,7 +420,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             tiles = self._frame_view_tiles(camera, width, height, features, row)
             defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
             defines.update(shared.view_tile_defines(tiles))
-            program = self._program(defines)
+            split = self._split(defines)
+            program = None if split else self._program(defines)
             if tiles is not None:
                 self._device.bind_view_tiles(tiles.table)
             self._device.bind(row)
@@ -390,8 +430,11 @@ class GlslBackend(shared.UploadedScene, Backend):
                     self._outputs[name].bind_to_storage_buffer(OUTPUT_BINDINGS[name])
             assert self._texture is not None
             self._texture.bind_to_image(0, read=False, write=True)
-            gx, gy = self.workgroup
-            program.run(math.ceil(width / gx), math.ceil(height / gy), 1)
+            if program is None:
+                self._dispatch_split(defines, width, height)
+            else:
+                gx, gy = self.workgroup
+                program.run(math.ceil(width / gx), math.ceil(height / gy), 1)
             ctx.memory_barrier()
             dispatched = time.perf_counter()
             frame = Frame(width, height)
@@ -420,6 +463,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             self._device.release()
             for buffer in self._outputs.values():
                 buffer.release()
+            if self._queue is not None:
+                self._queue.release()
             for program in self._programs.values():
                 program.release()
             if self._texture is not None:
@@ -427,6 +472,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         self._outputs.clear()
         self._programs.clear()
         self._texture = None
+        self._queue = None
         if self._owns_context:
             self._ctx.release()
         self._ctx = None

@@ -166,3 +166,10 @@ TriangleNormal fetch_triangle_normal_(int i)
 layout(rgba32ui, binding = 14) readonly restrict uniform uimage2D texels_img;
 #define TEXEL(i) (Texel(SHADING_F4_(texels_img, (i) * TEXELS_STRIDE)))
 #endif
+
+#if SPLIT_PASS == 2
+/* The second pass's ray: the kind of the event its first leg ended on in the first pass (journey.h), -1 for
+ * none; main.comp sets it from the queue. */
+int resume_kind_ = -1;
+#define RESUME_KIND resume_kind_
+#endif

@@ -22,8 +22,27 @@ layout(std430, binding = INSTANCE_BINDING) writeonly restrict buffer InstanceOut
 layout(std430, binding = EVENTS_BINDING) writeonly restrict buffer EventsOut { uint events_out[]; };
 #endif
 
+#if SPLIT_PASS
+/* The rays the first pass leaves to the second: a count, then one entry per ray, its pixel's index times 8
+ * plus its first leg's event kind + 1 (0: none). */
+layout(std430, binding = QUEUE_BINDING) restrict buffer Deferred { uint deferred_count; uint deferred_pad[3]; int deferred[]; };
+#endif
+
 void main()
 {
+#if SPLIT_PASS == 2
+    /* One invocation per queued ray, in the first pass's order (neighbouring pixels share SIMD lanes). */
+    uint k = gl_WorkGroupID.x * uint(WORKGROUP_X * WORKGROUP_Y) + gl_LocalInvocationIndex;
+    Camera cam = CAMERA_ROW;
+    HELD_BOX_
+    if (k >= deferred_count) {
+        return;
+    }
+    int entry = deferred[k];
+    int index = entry >> 3;
+    resume_kind_ = (entry & 7) - 1;
+    ivec2 p = ivec2(index % cam.size.x, index / cam.size.x);
+#else
 #if LANE_BLOCK_X == WORKGROUP_X && LANE_BLOCK_Y == 1
     ivec2 p = ivec2(gl_GlobalInvocationID.xy);
 #else
@@ -44,8 +63,15 @@ void main()
     if (p.x >= cam.size.x || p.y >= cam.size.y) {
         return;
     }
-    Pixel px = trace_pixel(cam, p.x, p.y);
     int index = p.y * cam.size.x + p.x;
+#endif
+    Pixel px = trace_pixel(cam, p.x, p.y);
+#if SPLIT_PASS == 1
+    if (px.deferred != -2) {
+        deferred[atomicAdd(deferred_count, 1u)] = index * 8 + px.deferred + 1;
+        return;
+    }
+#endif
 #if SHADE
     /* Exact: the unorm8 conversion of q / 255 rounds back to the integer q. A frame of other AOVs without
      * the colour (SHADE 0) leaves the image as it was. */

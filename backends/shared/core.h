@@ -216,6 +216,19 @@
 #define HAS_SPACE (HAS_ABERRATIONS || HAS_PORTALS)
 /* Box modes that bend the perceived direction w (entry and exit rules). */
 #define HAS_BENDING (HAS_RADIAL || HAS_ADDITIVE)
+/* Camera rays traced in two dispatches (GLSL, backends/glsl/backend.py): 1 traces every pixel's first leg and
+ * finishes the rays it ends, queueing the others; 2 takes the queued rays on from their first leg's end. On
+ * llvmpipe a branch runs for every lane and a loop's body at least once, active lanes or not, so the event
+ * loop cost a pass for every pixel; the queue gathers the rays that need it. 0: one dispatch. */
+#ifndef SPLIT_PASS
+#define SPLIT_PASS 0
+#endif
+#if SPLIT_PASS && !FIRST_LEG_APART
+#error "SPLIT_PASS needs the first leg searched apart from the event loop (FIRST_LEG_APART)"
+#endif
+#if SPLIT_PASS && HAS_SHADOWS
+#error "SPLIT_PASS: the first pass has no event loop for shadow rays"
+#endif
 
 /* Tolerances of docs/semantics.md section 2, relative to the size of the coordinates (at least 1):
  * hits at t <= T_MIN_RELATIVE * max(1, |p|) past the point p the ray leaves are ignored; candidates
@@ -319,6 +332,9 @@ STRUCT_BEGIN(Pixel)
     float perceived;
     int instance;   /* entity id, -1 for none */
     int events;
+#if SPLIT_PASS == 1
+    int deferred; /* -2: finished; else left for the second pass, its first leg's event kind (-1 for none) */
+#endif
 STRUCT_END(Pixel)
 
 /* --- small helpers ----------------------------------------------------------------- */

@@ -44,11 +44,16 @@ FORCE_INLINE Ray primary_ray(Camera cam, int i, int j)
 #define END_MISS 1
 #define END_LIMIT 2
 #define END_REACHED 3
+/* SPLIT_PASS 1: a camera ray that needs the event loop, left for the second pass. */
+#define END_DEFERRED 4
 
 STRUCT_BEGIN(Journey)
     Ray ray;     /* the state before the final event */
     MeshHit hit; /* END_MESH: the hit on ray's leg */
     int end;
+#if SPLIT_PASS == 1
+    int deferred; /* END_DEFERRED: the first leg's event kind, pending at the second pass's start (-1: none) */
+#endif
 STRUCT_END(Journey)
 
 #if HAS_SHADOWS
@@ -106,6 +111,14 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
      * event loop's searches walk the tree alone (but the portal legs' lists): llvmpipe runs both sides of a
      * branch masked, so a search that held both ran the list's copy of the instance code and the tree's at
      * every pass. The same pass as the loop's (no event yet: nothing pending, no walk, no limit reached). */
+#if SPLIT_PASS == 2
+    /* The first pass searched this ray's first leg (RESUME_KIND >= 0: it ended on that event, pending) or left
+     * it to the loop (-1); either way this pass goes on as the one dispatch would. */
+    if (RESUME_KIND >= 0) {
+        kind = RESUME_KIND;
+        pending = true;
+    }
+#else
     if (tiled && ev.search && tile_count >= 0 && meshes_reachable(SCENE_PASS ray.r)) {
 #if HAS_SHADOWS
         real t_stop = TO_REAL(-F_INF);
@@ -119,10 +132,17 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         pending = kind == EVENT_ABERRATION || kind == EVENT_PORTAL;
         ended = !pending;
     }
+#endif
 #define LOOP_LIST_LEG(n) (PORTAL_LEGS != 0 && (n) == 1)
 #else
 #define LOOP_LIST_LEG(n) TILE_LEG(n)
 #endif
+#if SPLIT_PASS == 1
+    trip.deferred = pending ? kind : -1;
+    if (!ended) {
+        trip.end = END_DEFERRED;
+    }
+#else
     for (int pass = 0; pass <= MAX_EVENTS && !ended; ++pass) {
 #if HAS_SPACE
 #if SPACE_WALK
@@ -240,6 +260,7 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
             break;
         }
     }
+#endif
     trip.ray = ray;
     trip.hit = hit;
     return trip;

@@ -31,6 +31,9 @@ Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
     int tile = (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);
 #endif
     Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false) TILED_ARG(true, tile));
+#if SPLIT_PASS == 1
+    px.deferred = end.end == END_DEFERRED ? end.deferred : -2;
+#endif
     ray = end.ray;
     MeshHit hit = end.hit;
     if (end.end == END_LIMIT) {

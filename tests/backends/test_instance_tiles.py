@@ -17,7 +17,8 @@ from engine.camera_view import pack_camera, scene_camera
 
 #: Frames with the instances' lists, without them, with every tile of over 3 on the tree (where the tree is
 #: compiled in), with the tree compiled in where the lists could serve alone, and with the first leg's list
-#: searched inside the event loop (beside portals and boxes) rather than before it.
+#: searched inside the event loop (beside portals and boxes) rather than before it, and (GLSL) in one dispatch
+#: rather than two.
 ON = {"INSTANCE_TILES": 1}
 VARIANTS: tuple[dict[str, int], ...] = (
     ON,
@@ -25,6 +26,7 @@ VARIANTS: tuple[dict[str, int], ...] = (
     {**ON, "INSTANCE_TILE_MAX": 3},
     {**ON, "INSTANCE_TILES_ONLY": 0, "INSTANCE_TILE_MAX": 3},
     {**ON, "FIRST_LEG_APART": 0},
+    {**ON, "SPLIT_PASSES": 0},
 )
 
 
