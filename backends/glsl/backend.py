@@ -57,6 +57,12 @@ OUTPUT_BINDINGS: dict[str, int] = {
 }
 #: The storage buffer of the rays the first of a frame's two dispatches leaves to the second (SPLIT_PASS).
 QUEUE_BINDING = CAMERA_BINDING + 5
+#: A frame in two dispatches that queues more than this share of its pixels for the second costs more than one
+#: dispatch (its first ran their first legs' code for nothing: a view-filling box or portal, 1.6x the time), and
+#: the frames after it take one until the camera has been away from that view for SINGLE_FRAMES frames; then
+#: two are tried again.
+SPLIT_QUEUED_MAX = 0.5
+SINGLE_FRAMES = 15
 #: Bytes per pixel and read-back dtype of each storage-buffer AOV.
 _OUTPUT_DTYPES: dict[str, np.dtype] = {
     "depth": np.dtype(np.float32),
@@ -174,6 +180,10 @@ class GlslBackend(shared.UploadedScene, Backend):
         #: that end on their first leg and the second runs the loop for the others alone.
         self.split_passes: bool = self.software
         self._queue: moderngl.Buffer | None = None
+        #: Frames left to trace in one dispatch (SINGLE_FRAMES after a split frame queued most of its pixels),
+        #: counted down only while the camera is away from where that frame was seen (its position and axes).
+        self._single_frames = 0
+        self._single_view: bytes = b""
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -360,17 +370,15 @@ class GlslBackend(shared.UploadedScene, Backend):
 
     # --- render ----------------------------------------------------------------------
 
-    def _split(self, defines: dict[str, int]) -> bool:
-        """Whether a frame of ``defines`` takes two dispatches: its camera rays' first legs searched apart
-        from the event loop (core.h's FIRST_LEG_APART), no shadow rays (they need the loop in the first
-        dispatch too); ``SPLIT_PASSES`` 0 in the extra defines: one dispatch (A/B, tests)."""
-        if not (self.split_passes and self.extra_defines.get("SPLIT_PASSES", 1)) or defines.get("HAS_SHADOWS"):
+    def split_frame(self, features: Features) -> bool:
+        """Two dispatches for a frame with portals or boxes and no shadow rays (they would need the event loop
+        in the first), unless the last such frame queued most of its pixels: its first dispatch ran every
+        lane's code masked for almost nothing, so the next :data:`SINGLE_FRAMES` take one dispatch."""
+        if not (self.split_passes and self.extra_defines.get("SPLIT_PASSES", 1)) or features.shadows:
             return False
-        space = defines.get("HAS_PORTALS") or defines.get("HAS_ABERRATIONS")
-        apart = space and defines.get("INSTANCE_TILES") and not defines.get("INSTANCE_TILES_ONLY")
-        return bool(defines.get("FIRST_LEG_APART", apart))
+        return bool(features.portals or features.aberration_modes) and self._single_frames == 0
 
-    def _dispatch_split(self, defines: dict[str, int], width: int, height: int) -> None:
+    def _dispatch_split(self, defines: dict[str, int], width: int, height: int) -> int:
         """The frame's two dispatches: every pixel's first leg, then the rays it queued (their count read
         back in between: a few bytes, and the second dispatch's size)."""
         first = self._program({**defines, "SPLIT_PASS": 1})
@@ -389,6 +397,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         queued = int(np.frombuffer(self._queue.read(4), np.uint32)[0])
         if queued:
             second.run(math.ceil(queued / (gx * gy)), 1, 1)
+        return queued
 
     def _ensure_outputs(self, width: int, height: int, aovs: Sequence[str]) -> None:
         """(Re)allocate the colour texture and the requested AOV buffers only when the size changes."""
@@ -415,12 +424,18 @@ class GlslBackend(shared.UploadedScene, Backend):
             row = pack_camera(
                 camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
             )
+            view = camera.position.tobytes() + camera.rotation.tobytes()
+            if self._single_frames and view != self._single_view:
+                self._single_frames -= 1
             features = self._frame_features(camera, width, height, shade=shades(aovs))
             defines = self._defines(aovs, features)
             tiles = self._frame_view_tiles(camera, width, height, features, row)
             defines.update(self._frame_space_defines(features, row, self.precision), **self.extra_defines)
             defines.update(shared.view_tile_defines(tiles))
-            split = self._split(defines)
+            # Two where the first legs take the instances' lists apart from the event loop (FIRST_LEG_APART): without
+            # the lists a first leg walks the tree in the first dispatch as in the loop's first pass, and two save
+            # nothing (space-count in view: 0.99-1.03x the time); with the lists alone the loop is already lean.
+            split = self.split_frame(features) and tiles is not None and tiles.instances and not tiles.instances_only
             program = None if split else self._program(defines)
             if tiles is not None:
                 self._device.bind_view_tiles(tiles.table)
@@ -431,7 +446,9 @@ class GlslBackend(shared.UploadedScene, Backend):
             assert self._texture is not None
             self._texture.bind_to_image(0, read=False, write=True)
             if program is None:
-                self._dispatch_split(defines, width, height)
+                if self._dispatch_split(defines, width, height) > SPLIT_QUEUED_MAX * width * height:
+                    self._single_frames = SINGLE_FRAMES
+                    self._single_view = view
             else:
                 gx, gy = self.workgroup
                 program.run(math.ceil(width / gx), math.ceil(height / gy), 1)

@@ -223,8 +223,8 @@
 #ifndef SPLIT_PASS
 #define SPLIT_PASS 0
 #endif
-#if SPLIT_PASS && !FIRST_LEG_APART
-#error "SPLIT_PASS needs the first leg searched apart from the event loop (FIRST_LEG_APART)"
+#if SPLIT_PASS && !HAS_SPACE
+#error "SPLIT_PASS: a frame without portals or boxes has no event loop to defer"
 #endif
 #if SPLIT_PASS && HAS_SHADOWS
 #error "SPLIT_PASS: the first pass has no event loop for shadow rays"

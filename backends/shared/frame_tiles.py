@@ -114,11 +114,12 @@ def frame_view_tiles(
     only = bool(instances) and not (features.aberration_modes or features.shadows)
     only = only and (not features.portals or legs is not None)
     only = only and bool(scene.extra_defines.get("INSTANCE_TILES_ONLY", 1))
-    # In two dispatches a ray of a tile too long to list would wait for the second one's event loop: listed
-    # whole, it ends in the first (the hotel's views on GLSL: 0.89-0.97x the time uncapped).
-    split = scene.split_passes and scene.extra_defines.get("SPLIT_PASSES", 1) and not features.shadows
-    uncapped = only or bool(split)
-    instance_max = 1 << 30 if uncapped else scene.extra_defines.get("INSTANCE_TILE_MAX", INSTANCE_TILE_MAX)
+    # In two dispatches (GLSL's split_frame) a ray of a tile too long to list would wait for the second one's
+    # event loop: listed whole, it ends in the first (the hotel's views on GLSL: 0.89-0.97x the time uncapped).
+    # Beside boxes and few portals two dispatches with the lists cost as one without them (space-count in view,
+    # 320x320: 0.99-1.01x), where one with them costs 1.12-1.23x: the lists stay off there.
+    cap = 1 << 30 if scene.split_frame(features) else INSTANCE_TILE_MAX
+    instance_max = 1 << 30 if only else scene.extra_defines.get("INSTANCE_TILE_MAX", cap)
     seen = scene._seen_portals  # the portal leaves, where the frame's features walked them for this camera
     table = view_tiles(
         camera,
