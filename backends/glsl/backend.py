@@ -25,6 +25,7 @@ import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
+from backends.glsl.split import QUEUE_BINDING, SplitDispatch
 from backends.glsl.tables import (
     CAMERA_BINDING,
     CAMERA_IMAGE,
@@ -55,14 +56,6 @@ OUTPUT_BINDINGS: dict[str, int] = {
     "instance": CAMERA_BINDING + 3,
     "events": CAMERA_BINDING + 4,
 }
-#: The storage buffer of the rays the first of a frame's two dispatches leaves to the second (SPLIT_PASS).
-QUEUE_BINDING = CAMERA_BINDING + 5
-#: A frame in two dispatches that queues more than this share of its pixels for the second costs more than one
-#: dispatch (its first ran their first legs' code for nothing: a view-filling box or portal, 1.6x the time), and
-#: the frames after it take one until the camera has been away from that view for SINGLE_FRAMES frames; then
-#: two are tried again.
-SPLIT_QUEUED_MAX = 0.5
-SINGLE_FRAMES = 15
 #: Bytes per pixel and read-back dtype of each storage-buffer AOV.
 _OUTPUT_DTYPES: dict[str, np.dtype] = {
     "depth": np.dtype(np.float32),
@@ -175,15 +168,10 @@ class GlslBackend(shared.UploadedScene, Backend):
         self.instance_tiles = self.view_tiles
         self.portal_legs = self.view_tiles
         #: Whether a frame whose camera rays' first legs take their instances from the tiles' lists beside
-        #: portals or boxes is traced in two dispatches (SPLIT_PASS in core.h): llvmpipe runs the event
-        #: loop's body for every SIMD lane even when none needs it, so the first dispatch finishes the rays
-        #: that end on their first leg and the second runs the loop for the others alone.
-        self.split_passes: bool = self.software
-        self._queue: moderngl.Buffer | None = None
-        #: Frames left to trace in one dispatch (SINGLE_FRAMES after a split frame queued most of its pixels),
-        #: counted down only while the camera is away from where that frame was seen (its position and axes).
-        self._single_frames = 0
-        self._single_view: bytes = b""
+        #: portals or boxes is traced in two dispatches (backends/glsl/split.py): llvmpipe runs the event
+        #: loop's body for every SIMD lane even when none needs it.
+        self.split_passes: bool = self.software and self.view_tiles
+        self._split = SplitDispatch()
         self._outputs: dict[str, moderngl.Buffer] = {}
         self._texture: moderngl.Texture | None = None
         self._size: tuple[int, int] = (0, 0)
@@ -372,32 +360,10 @@ class GlslBackend(shared.UploadedScene, Backend):
 
     def split_frame(self, features: Features) -> bool:
         """Two dispatches for a frame with portals or boxes and no shadow rays (they would need the event loop
-        in the first), unless the last such frame queued most of its pixels: its first dispatch ran every
-        lane's code masked for almost nothing, so the next :data:`SINGLE_FRAMES` take one dispatch."""
+        in the first), unless a recent split frame queued most of its pixels (split.SPLIT_QUEUED_MAX)."""
         if not (self.split_passes and self.extra_defines.get("SPLIT_PASSES", 1)) or features.shadows:
             return False
-        return bool(features.portals or features.aberration_modes) and self._single_frames == 0
-
-    def _dispatch_split(self, defines: dict[str, int], width: int, height: int) -> int:
-        """The frame's two dispatches: every pixel's first leg, then the rays it queued (their count read
-        back in between: a few bytes, and the second dispatch's size)."""
-        first = self._program({**defines, "SPLIT_PASS": 1})
-        second = self._program({**defines, "SPLIT_PASS": 2})
-        ctx = self._context()
-        need = 16 + 4 * width * height
-        if self._queue is None or self._queue.size < need:
-            if self._queue is not None:
-                self._queue.release()
-            self._queue = ctx.buffer(reserve=need)
-        self._queue.write(bytes(4))
-        self._queue.bind_to_storage_buffer(QUEUE_BINDING)
-        gx, gy = self.workgroup
-        first.run(math.ceil(width / gx), math.ceil(height / gy), 1)
-        ctx.memory_barrier()
-        queued = int(np.frombuffer(self._queue.read(4), np.uint32)[0])
-        if queued:
-            second.run(math.ceil(queued / (gx * gy)), 1, 1)
-        return queued
+        return bool(features.portals or features.aberration_modes) and self._split.allowed
 
     def _ensure_outputs(self, width: int, height: int, aovs: Sequence[str]) -> None:
         """(Re)allocate the colour texture and the requested AOV buffers only when the size changes."""
@@ -424,9 +390,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             row = pack_camera(
                 camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
             )
-            view = camera.position.tobytes() + camera.rotation.tobytes()
-            if self._single_frames and view != self._single_view:
-                self._single_frames -= 1
+            self._split.observe(camera)
             features = self._frame_features(camera, width, height, shade=shades(aovs))
             defines = self._defines(aovs, features)
             tiles = self._frame_view_tiles(camera, width, height, features, row)
@@ -446,9 +410,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             assert self._texture is not None
             self._texture.bind_to_image(0, read=False, write=True)
             if program is None:
-                if self._dispatch_split(defines, width, height) > SPLIT_QUEUED_MAX * width * height:
-                    self._single_frames = SINGLE_FRAMES
-                    self._single_view = view
+                passes = (self._program({**defines, "SPLIT_PASS": 1}), self._program({**defines, "SPLIT_PASS": 2}))
+                self._split.run(ctx, passes, camera, (width, height), self.workgroup)
             else:
                 gx, gy = self.workgroup
                 program.run(math.ceil(width / gx), math.ceil(height / gy), 1)
@@ -480,8 +443,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             self._device.release()
             for buffer in self._outputs.values():
                 buffer.release()
-            if self._queue is not None:
-                self._queue.release()
+            self._split.release()
             for program in self._programs.values():
                 program.release()
             if self._texture is not None:
@@ -489,7 +451,6 @@ class GlslBackend(shared.UploadedScene, Backend):
         self._outputs.clear()
         self._programs.clear()
         self._texture = None
-        self._queue = None
         if self._owns_context:
             self._ctx.release()
         self._ctx = None

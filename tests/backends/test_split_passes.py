@@ -13,7 +13,7 @@ from scenes import many_instances
 from test_parity import render
 from test_space_trees import SIZE, same_frames
 
-from backends.glsl.backend import SINGLE_FRAMES, SPLIT_QUEUED_MAX, GlslBackend
+from backends.glsl.split import SINGLE_FRAMES, SPLIT_QUEUED_MAX, SplitDispatch
 from backends.shared import INSTANCE_TILE_MIN_BESIDE
 from engine.scene import Scene
 
@@ -36,14 +36,14 @@ def doors_among_instances() -> Scene:
 def queued(monkeypatch) -> list[float]:
     """The share of its pixels each split frame queued for the second dispatch, in order."""
     shares: list[float] = []
-    dispatch = GlslBackend._dispatch_split
+    dispatch = SplitDispatch.run
 
-    def counted(self, defines, width, height):
-        count = dispatch(self, defines, width, height)
-        shares.append(count / (width * height))
+    def counted(self, ctx, programs, camera, size, workgroup):
+        count = dispatch(self, ctx, programs, camera, size, workgroup)
+        shares.append(count / (size[0] * size[1]))
         return count
 
-    monkeypatch.setattr(GlslBackend, "_dispatch_split", counted)
+    monkeypatch.setattr(SplitDispatch, "run", counted)
     return shares
 
 
@@ -61,7 +61,7 @@ def test_two_dispatches_give_one_dispatchs_frames(backend_factory, queued, preci
             frames = []
             for defines in VARIANTS:
                 backend.extra_defines = dict(defines)
-                backend._single_frames = 0  # whatever the frame before queued
+                backend._split.single_frames = 0  # whatever the frame before queued
                 frames.append(render(backend, scene, SIZE))
             for other in frames[1:]:
                 same_frames(frames[0], other)
@@ -85,7 +85,7 @@ def test_a_frame_queueing_most_pixels_leaves_the_next_to_one_dispatch(backend_fa
     )  # fmt: skip
     scene.set_camera((0.0, 1.8, 12.0), look_at=(0.0, 1.8, 0.0), fov_deg=60.0)
     try:
-        backend._single_frames = 0  # whatever the frame before queued
+        backend._split.single_frames = 0  # whatever the frame before queued
         render(backend, scene, SIZE)
         assert len(queued) == 1 and queued[0] > SPLIT_QUEUED_MAX  # the door fills the view
         for _ in range(3 * SINGLE_FRAMES):  # the camera still: one dispatch from here on
