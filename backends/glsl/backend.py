@@ -399,7 +399,8 @@ class GlslBackend(shared.UploadedScene, Backend):
             # Two where the first legs take the instances' lists apart from the event loop (FIRST_LEG_APART): without
             # the lists a first leg walks the tree in the first dispatch as in the loop's first pass, and two save
             # nothing (space-count in view: 0.99-1.03x the time); with the lists alone the loop is already lean.
-            split = self.split_frame(features) and tiles is not None and tiles.instances and not tiles.instances_only
+            apart = tiles is not None and tiles.instances and not tiles.instances_only
+            split = apart and self.extra_defines.get("FIRST_LEG_APART", 1) and self.split_frame(features)
             program = None if split else self._program(defines)
             if tiles is not None:
                 self._device.bind_view_tiles(tiles.table)

@@ -254,9 +254,6 @@ class UploadedScene:
     #: ... and the leg after a first portal's instances (PORTAL_LEGS), where the frame allows: GLSL's (PoCL: 1.02x
     #: ten-boxes-portals' time at 400x400, 0.97x at 800x800), ``PORTAL_LEGS=1`` or ``=0`` decides alone.
     portal_legs: bool = False
-    #: Whether frames with portals or boxes may be traced in two dispatches (GLSL on llvmpipe: SPLIT_PASS in
-    #: core.h), ``SPLIT_PASSES=0`` in the extra defines: one.
-    split_passes: bool = False
     #: Extra defines for every variant (each backend's; ``VIEW_TILES=0`` or ``INSTANCE_TILES=0`` also skips
     #: building that section of the tiles).
     extra_defines: dict[str, int]
@@ -375,8 +372,8 @@ class UploadedScene:
         return replace(features, portals=False, aberration_modes=frozenset())
 
     def split_frame(self, features: Features) -> bool:
-        """Whether a frame of ``features`` is traced in two dispatches (the backend's ``split_passes``): none by
-        default; GLSL's own."""
+        """Whether a frame of ``features`` may be traced in two dispatches: none by default; GLSL's own
+        (backends/glsl/split.py)."""
         return False
 
     def _instance_lanes(self) -> TlasLanes:

@@ -216,15 +216,15 @@
 #define HAS_SPACE (HAS_ABERRATIONS || HAS_PORTALS)
 /* Box modes that bend the perceived direction w (entry and exit rules). */
 #define HAS_BENDING (HAS_RADIAL || HAS_ADDITIVE)
-/* Camera rays traced in two dispatches (GLSL, backends/glsl/backend.py): 1 traces every pixel's first leg and
+/* Camera rays traced in two dispatches (GLSL, backends/glsl/split.py): 1 traces every pixel's first leg and
  * finishes the rays it ends, queueing the others; 2 takes the queued rays on from their first leg's end. On
  * llvmpipe a branch runs for every lane and a loop's body at least once, active lanes or not, so the event
  * loop cost a pass for every pixel; the queue gathers the rays that need it. 0: one dispatch. */
 #ifndef SPLIT_PASS
 #define SPLIT_PASS 0
 #endif
-#if SPLIT_PASS && !HAS_SPACE
-#error "SPLIT_PASS: a frame without portals or boxes has no event loop to defer"
+#if SPLIT_PASS && !FIRST_LEG_APART
+#error "SPLIT_PASS needs the first leg searched apart from the event loop (FIRST_LEG_APART)"
 #endif
 #if SPLIT_PASS && HAS_SHADOWS
 #error "SPLIT_PASS: the first pass has no event loop for shadow rays"

@@ -106,13 +106,11 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
     bool pending = false;
     int kind = EVENT_NONE;
     bool ended = false;
-#if FIRST_LEG_APART || SPLIT_PASS
+#if FIRST_LEG_APART
     /* A camera ray's first leg whose tile lists its instances is searched here, with the list alone, and the
      * event loop's searches walk the tree alone (but the portal legs' lists): llvmpipe runs both sides of a
      * branch masked, so a search that held both ran the list's copy of the instance code and the tree's at
-     * every pass. The same pass as the loop's (no event yet: nothing pending, no walk, no limit reached). The
-     * first of two dispatches searches every first leg here, as the loop's first pass would, with the tree
-     * where the first leg is not apart. */
+     * every pass. The same pass as the loop's (no event yet: nothing pending, no walk, no limit reached). */
 #if SPLIT_PASS == 2
     /* The first pass searched this ray's first leg (RESUME_KIND >= 0: it ended on that event, pending) or left
      * it to the loop (-1); either way this pass goes on as the one dispatch would. */
@@ -121,20 +119,11 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         pending = true;
     }
 #else
-#if FIRST_LEG_APART
     if (tiled && ev.search && tile_count >= 0 && meshes_reachable(SCENE_PASS ray.r)) {
 #if HAS_SHADOWS
         real t_stop = TO_REAL(-F_INF);
 #endif
         MeshHit mesh = tile_mesh(SCENE_PASS ray.o, ray.r, ev.t_min, ev.t_cut, tile_first, tile_count STOP_PASS);
-#else
-    if (ev.search && meshes_reachable(SCENE_PASS ray.r)) {
-#if HAS_SHADOWS
-        real t_stop = TO_REAL(-F_INF);
-#endif
-        MeshHit mesh = nearest_mesh(SCENE_PASS ray.o, ray.r, ev.t_min, ev.t_cut STOP_PASS
-                                        TILE_LIST_ARG(tile_first, tiled && TILE_LEG(0) ? tile_count : -1));
-#endif
         kind = leg_event_kind(ev, mesh, ray.o_len);
         if (kind == EVENT_MESH) {
             hit = mesh;
@@ -144,8 +133,6 @@ FORCE_INLINE Journey journey(SCENE_DECL Camera cam, Ray ray, real clear, real re
         ended = !pending;
     }
 #endif
-#endif
-#if FIRST_LEG_APART
 #define LOOP_LIST_LEG(n) (PORTAL_LEGS != 0 && (n) == 1)
 #else
 #define LOOP_LIST_LEG(n) TILE_LEG(n)

@@ -51,7 +51,7 @@ def queued(monkeypatch) -> list[float]:
 def test_two_dispatches_give_one_dispatchs_frames(backend_factory, queued, precision):
     backend = backend_factory("glsl", precision)
     if not backend.split_passes:
-        pytest.skip(f"the GLSL backend splits frames on llvmpipe only, not on {backend.info().get('renderer')}")
+        pytest.skip(f"the GLSL backend splits frames on llvmpipe (tables in images) only: {backend.info()}")
     rng = np.random.default_rng(11)
     scene = doors_among_instances()
     cameras = [(tuple(rng.uniform([-4.0, 1.0, 6.0], [4.0, 3.0, 12.0])), (0.0, 1.5, 2.0)) for _ in range(4)]
@@ -77,7 +77,7 @@ def test_two_dispatches_give_one_dispatchs_frames(backend_factory, queued, preci
 def test_a_frame_queueing_most_pixels_leaves_the_next_to_one_dispatch(backend_factory, queued):
     backend = backend_factory("glsl", "f32")
     if not backend.split_passes:
-        pytest.skip(f"the GLSL backend splits frames on llvmpipe only, not on {backend.info().get('renderer')}")
+        pytest.skip(f"the GLSL backend splits frames on llvmpipe (tables in images) only: {backend.info()}")
     scene = doors_among_instances()
     scene.add_portal_pair(
         "big", "far", a=dict(position=(0.0, 1.8, 9.0), scale=(8.0, 8.0, 1.0)),
