@@ -18,6 +18,7 @@ as float64) where the device has ``cl_khr_fp64``.
 from __future__ import annotations
 
 import hashlib
+import re
 import sys
 import time
 from collections.abc import Sequence
@@ -83,6 +84,9 @@ BUILD_OPTIONS: tuple[str, ...] = ("-cl-denorms-are-zero",)
 CPU_LOCAL_SIZE: tuple[int, int] = (16, 16)
 #: Work-group size on a GPU: 64 work-items in an 8x8 tile (coherent rays, any warp size).
 GPU_LOCAL_SIZE: tuple[int, int] = (8, 8)
+#: A compiler diagnostic on the source in a build log (``error: /path/file.cl:LINE:COL: ...``): the source's own
+#: error, which no cache entry caused.
+SOURCE_ERROR = re.compile(r"^(?:fatal )?error: \S+\.cl:\d+:\d+: ", re.MULTILINE)
 
 
 class OpenClBackend(shared.UploadedScene, Backend):
@@ -322,7 +326,10 @@ class OpenClBackend(shared.UploadedScene, Backend):
                     options=list(self.build_options), cache_dir=self._cache_dir
                 )
             except cl.Error as e:  # its message carries the build log
-                removed = cache.forget_touched(started) if attempt == 1 else []
+                # An error on the source leaves the cache alone: the entries touched meanwhile are other
+                # processes' (parallel test workers, a cluster's workers sharing the cache), still in use.
+                retry = attempt == 1 and SOURCE_ERROR.search(str(e)) is None
+                removed = cache.forget_touched(started) if retry else []
                 if not removed:
                     raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
                 print(

@@ -10,7 +10,8 @@ recorded SHA-256 (``aberrant-verified.json`` in the entry); files not recorded y
 must at least be whole (bitcode whose top-level blocks end at the end of the file,
 an ELF file whose headers and segments lie inside it). An entry that fails is
 removed, with one warning line, and PoCL rebuilds it. A build that fails while it
-used a cache entry gets that entry removed and one more try (:func:`forget_touched`).
+used a cache entry gets that entry removed and one more try (:func:`forget_touched`); one that fails on an
+error in its source leaves the cache alone.
 
 A cache directory that cannot be used (a file, ``/dev/null``, read-only) costs
 rebuilds, never the backend: the process compiles into a private temporary

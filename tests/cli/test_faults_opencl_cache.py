@@ -223,3 +223,24 @@ def test_a_build_that_fails_from_a_cache_entry_removes_it_and_tries_again(monkey
     assert kernel is not None and len(calls) == 2
     assert not entry.exists()
     assert "did not build from its cache entry" in capsys.readouterr().err
+
+
+def test_an_error_in_the_source_leaves_the_cache_entries_touched_meanwhile(tmp_path, capsys):
+    """Another process's entry, used while this build failed on its own source, stays: only a failure that a
+    cache entry may have caused removes what was touched."""
+    from backends.opencl.backend import OpenClBackend
+    from engine.errors import BackendUnavailable
+
+    entry = tmp_path / "pocl" / "AB" / "CDEF"
+    entry.mkdir(parents=True)
+    (entry / "program.bc").write_bytes(b"BC\xc0\xde")
+    backend = OpenClBackend()
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(cache, "_ours", str(tmp_path / "pocl"))
+            with pytest.raises(BackendUnavailable, match="boom"):
+                backend._build("__kernel void trace(__global int *x) { x[0] = 1; }\n#error boom\n")
+    finally:
+        backend.release()
+    assert (entry / "program.bc").exists()
+    assert "did not build from its cache entry" not in capsys.readouterr().err
