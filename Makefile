@@ -37,6 +37,8 @@ INSTALLED := $(VENV)/.stamp-installed
 
 # Extra arguments for pytest, e.g. `make test PYTEST_ARGS="-k portal -x"`.
 PYTEST_ARGS ?=
+# Test worker processes (pytest-xdist): one per core; 0 runs the tests in make's own pytest process.
+TEST_WORKERS ?= auto
 BENCH_GPU_OUT ?= docs/bench/gpu
 DEMO := aberration_tunnels
 DEMO_OUT := out/$(DEMO).png
@@ -47,7 +49,7 @@ DEMO_CLIP := out/$(DEMO).gif
 help:
 	@echo "aberrant — make targets:"
 	echo "  make demo    install what is missing, render $(DEMO) to $(DEMO_OUT) and $(DEMO_CLIP)"
-	echo "  make test    install what is missing, run the test suite (pytest -q)"
+	echo "  make test    install what is missing, run the test suite (pytest -q, a worker per core)"
 	echo "  make bench   speed against error report: aberrant bench --out out/bench (BENCH_ARGS=...)"
 	echo "  make bench-gpu  the bench on an NVIDIA machine: scripts/bench_gpu.sh run $(BENCH_GPU_OUT)"
 	echo "  make bench-pytest  the pytest-benchmark micro-benchmarks"
@@ -150,7 +152,7 @@ docs: | apt-packages $(INSTALLED)
 	@env -u DISPLAY -u WAYLAND_DISPLAY "$(PY)" docs/build_api.py out/api
 
 test: | apt-packages $(INSTALLED)
-	@"$(PY)" -m pytest -q $(PYTEST_ARGS)
+	@"$(PY)" -m pytest -q -n $(TEST_WORKERS) $(PYTEST_ARGS)
 
 # Speed against error: every backend and setting on every scene -> out/bench/{report.md,results.json,speed_vs_error.png}.
 bench: | apt-packages $(INSTALLED)

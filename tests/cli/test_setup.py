@@ -51,6 +51,12 @@ def test_make_bench_gpu_runs_the_script_into_docs():
     assert 'scripts/bench_gpu.sh run "docs/bench/gpu"' in plan
 
 
+@needs_make
+def test_make_test_runs_a_worker_per_core_unless_told_otherwise():
+    assert "-m pytest -q -n auto" in run_make("-n", "test").stdout
+    assert "-m pytest -q -n 0" in run_make("-n", "test", "TEST_WORKERS=0").stdout
+
+
 def test_make_bench_pytest_runs_benchmarks_despite_skip_in_addopts():
     plan = run_make("-n", "bench-pytest").stdout
     assert "--benchmark-only" in plan
