@@ -40,7 +40,7 @@ if args["overlays"]:
     model.add_portal_pair((1.4, 1.3, 0.8))
     model.select(None)
 window = EditorWindow(model, size=tuple(args["size"]), backend=args["backend"])
-window.host.scale = 1.0
+window.host.scale = args["scale"]
 window.run(frames=args["frames"], screenshot=args["shot"])
 ui, host = window.ui, window.host
 report = {
@@ -140,9 +140,12 @@ def run_editor(
     bench=0,
     play=None,
     idle=0,
+    scale=1.0,
 ) -> dict:
+    """``scale``: the tracer's resolution over the viewport's (the editor's own setting)."""
     env = {**os.environ, "DISPLAY": display}
     args = {"size": SIZE, "frames": frames, "shot": str(shot), "overlays": overlays, "backend": backend}
+    args["scale"] = scale
     args.update(bench=bench, play=None if play is None else str(play), idle=idle)
     result = subprocess.run(
         [sys.executable, "-c", SCRIPT, json.dumps(args)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
@@ -224,7 +227,9 @@ def test_a_still_editor_traces_once_and_sleeps(display):
     """No input: once the still view has its samples, the loop sleeps on the event queue and neither the
     tracer nor the preview draws again; moving the camera traces once more."""
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
-    report = run_editor(display, ARTIFACTS / "editor_idle.png", overlays=True, backend="reference", frames=6, idle=10)
+    # The reference refines 16 samples a pixel: at a quarter of the viewport's resolution (100 s at the whole).
+    shot = ARTIFACTS / "editor_idle.png"
+    report = run_editor(display, shot, overlays=True, backend="reference", frames=6, idle=10, scale=0.25)
     assert report["traced"] >= 1 and report["error"] is None
     assert report["refined"] == STILL_SPP
     traced, previewed, still = report["idle"]
