@@ -145,8 +145,7 @@ def run_editor(
     """``scale``: the tracer's resolution over the viewport's (the editor's own setting)."""
     env = {**os.environ, "DISPLAY": display}
     args = {"size": SIZE, "frames": frames, "shot": str(shot), "overlays": overlays, "backend": backend}
-    args["scale"] = scale
-    args.update(bench=bench, play=None if play is None else str(play), idle=idle)
+    args.update(bench=bench, play=None if play is None else str(play), idle=idle, scale=scale)
     result = subprocess.run(
         [sys.executable, "-c", SCRIPT, json.dumps(args)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=240
     )
