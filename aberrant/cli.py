@@ -4,47 +4,32 @@ TelloEngine scenes, export glTF, list backends, list demos.
 Every error a user can cause (a bad scene file, an unknown backend or demo, a
 bad size, an output folder that does not exist) is one line on stderr,
 ``aberrant: error: ...``, and exit status 2, with no traceback. Outputs are
-written only after the render succeeded, each through a temporary file and a
+written only after the command succeeded, each through a temporary file and a
 rename, so a failed run never leaves a new or half-written file behind and
-never overwrites an old one.
+never overwrites an old one. The commands that render or open a window live in
+render_command.py and window_commands.py; the argument checks they share in
+arguments.py.
 """
 
 from __future__ import annotations
 
 import argparse
-import io
 import os
-import re
 import sys
-import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn, TypeVar
+from typing import NoReturn
 
-import numpy as np
-
-from aberrant.running import PROG, check_frame_memory, one_line, with_fallback
+from aberrant.arguments import UsageError, check_cluster_args, check_target, parse_size, parse_spp
+from aberrant.render_command import cmd_render
+from aberrant.running import PROG, one_line
 from aberrant.signals import Terminated, terminations_raise
+from aberrant.window_commands import cmd_editor, cmd_play
 from engine.errors import AberrantError, shorten
 
-if TYPE_CHECKING:
-    from aberrant.levels import Level
-    from backends.base import Backend, Frame
-    from editor.reload import LevelWatcher
-
-#: The largest image side ``render`` accepts (guards against typos like 80000x600).
-MAX_SIDE = 16384
-#: Keys of the ``--aovs`` archive: the AOVs besides colour (which is the PNG).
-NPZ_AOVS = ("depth", "perceived", "instance", "events")
 #: What a SCENE argument may be (resolved by aberrant/levels.py).
 LEVEL_HELP = "a scene file (.json), a glTF file (.glb/.gltf), a level module (level.py[:func]) or a demo name"
-
-T = TypeVar("T")
-
-
-class UsageError(AberrantError):
-    """A command-line argument is wrong."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -54,170 +39,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    """``"640x480"`` -> ``(640, 480)``; both sides in [1, MAX_SIDE]."""
-    match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", text)
-    if not match:
-        raise UsageError(f"--size must be WIDTHxHEIGHT in pixels, e.g. 640x480; got {text!r}")
-    width, height = int(match.group(1)), int(match.group(2))
-    for side, value in (("width", width), ("height", height)):
-        if not 1 <= value <= MAX_SIDE:
-            raise UsageError(f"--size {side} must lie in [1, {MAX_SIDE}] pixels; got {text!r}")
-    return width, height
-
-
-def parse_spp(value: int) -> int:
-    """``--spp`` checked before anything is opened: samples a pixel, 1 to MAX_SPP."""
-    from backends.samples import MAX_SPP
-
-    if not 1 <= value <= MAX_SPP:
-        raise UsageError(f"--spp (samples per pixel) must lie in [1, {MAX_SPP}]; got {value}")
-    return value
-
-
-def _check_output(option: str, path: Path) -> None:
-    """Fail before rendering when ``path`` cannot be written (so no render time is wasted).
-
-    What is already there must be a writable regular file, or a symlink to one
-    (written through); a device, FIFO, socket or folder is refused, never replaced.
-    """
-    from engine.atomic_files import UnsafeTarget, check_writable
-
-    try:
-        check_writable(path)
-    except UnsafeTarget as e:
-        raise UsageError(f"{option} {shorten(path)}: {e.strerror}") from None
-
-
-def _png_bytes(color: np.ndarray) -> bytes:
-    from PIL import Image
-
-    buffer = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(color), mode="RGBA" if color.shape[2] == 4 else "RGB").save(buffer, "PNG")
-    return buffer.getvalue()
-
-
-def _npz_bytes(frame: Frame) -> bytes:
-    buffer = io.BytesIO()
-    # mypy cannot tell that the unpacked AOV names never include savez's allow_pickle keyword.
-    np.savez_compressed(buffer, **{name: frame.aov(name) for name in NPZ_AOVS})  # type: ignore[arg-type]
-    return buffer.getvalue()
-
-
-def cmd_render(args: argparse.Namespace) -> int:
-    from aberrant.levels import open_level
-    from backends.base import AOVS
-    from engine.atomic_files import write_atomically
-    from systems.app import render_once
-
-    if args.path:
-        return cmd_render_path(args)
-    if args.frames is not None or args.fps is not None or args.duration is not None:
-        raise UsageError("--frames, --fps and --duration render a flythrough; add --path")
-    if args.workers is not None or args.scheduler is not None:
-        raise UsageError("--workers and --scheduler spread a flythrough's frames; add --path")
-    width, height = parse_size(args.size)
-    spp = parse_spp(args.spp)
-    out = Path(args.out or "frame.png")
-    _check_output("--out", out)
-    npz = Path(args.aovs) if args.aovs else None
-    if npz is not None:
-        _check_output("--aovs", npz)
-        if os.path.abspath(npz) == os.path.abspath(out):
-            raise UsageError("--out and --aovs name the same file")
-    scene = open_level(args.scene).scene
-    aovs = AOVS if npz is not None else ("color",)
-
-    def render(backend: Backend) -> tuple[Frame, float]:
-        check_frame_memory(backend, (width, height), aovs, "leave out --aovs" if npz is not None else "")
-        start = time.perf_counter()
-        frame = render_once(scene, backend, (width, height), aovs, spp=spp)
-        return frame, (time.perf_counter() - start) * 1e3
-
-    try:
-        (frame, elapsed_ms), backend_name = with_fallback(args, render)
-    finally:
-        scene.close()
-    outputs = {out: _png_bytes(frame.aov("color"))}
-    if npz is not None:
-        outputs[npz] = _npz_bytes(frame)
-    write_atomically(outputs)
-    for path in outputs:
-        print(f"wrote {path}")
-    render_ms = frame.timings_ms.get("render")
-    detail = f" (render {render_ms:.1f} ms)" if render_ms is not None else ""
-    samples = f", {spp} samples a pixel" if spp > 1 else ""
-    print(f"{width}x{height}{samples} with the {backend_name} backend in {elapsed_ms:.1f} ms{detail}")
-    return 0
-
-
-def _check_cluster_args(args: argparse.Namespace) -> None:
-    """``--workers N`` or ``--scheduler ADDR``, not both, and N at least 1."""
-    if args.workers is not None and args.scheduler is not None:
-        raise UsageError("give --workers (a cluster started here) or --scheduler (a running one), not both")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be at least 1, got {args.workers}")
-
-
-def cmd_render_path(args: argparse.Namespace) -> int:
-    """``render --path``: a flythrough walked by the real systems (aberrant/flythrough.py)."""
-    from aberrant.flythrough import check_output, path_for, plan_frames, render_flythrough
-    from aberrant.levels import open_level
-
-    if args.aovs:
-        raise UsageError("--aovs writes one frame's AOVs; it cannot be combined with --path")
-    width, height = parse_size(args.size)
-    spp = parse_spp(args.spp)
-    out = Path(args.out or "flythrough.gif")
-    check_output(out)
-    _check_cluster_args(args)
-    level = open_level(args.scene)
-    scene = level.scene
-    if args.workers is not None or args.scheduler is not None:
-        return _render_path_on_cluster(args, level, (width, height), out, spp)
-
-    def render(backend: Backend) -> float:
-        check_frame_memory(backend, (width, height), ("color",), "")
-        start = time.perf_counter()
-        render_flythrough(scene, backend, path, frames, (width, height), out, fps=fps, spp=spp)
-        return time.perf_counter() - start
-
-    try:
-        path = path_for(level)
-        frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
-        print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps")
-        elapsed, backend_name = with_fallback(args, render)
-    finally:
-        scene.close()
-    print(f"wrote {out}")
-    print(f"{frames} frames of {width}x{height} with the {backend_name} backend in {elapsed:.1f} s")
-    return 0
-
-
-def _render_path_on_cluster(args: argparse.Namespace, level: Level, size: tuple[int, int], out: Path, spp: int) -> int:
-    """``render --path --workers N | --scheduler ADDR``: the frames rendered on a Dask cluster (aberrant/cluster.py)."""
-    from aberrant.cluster import render_distributed
-    from aberrant.flythrough import path_for, plan_frames
-    from backends.base import default_backend_name
-
-    try:
-        path = path_for(level)
-        frames, fps = plan_frames(path, fps=args.fps, frames=args.frames, duration=args.duration)
-        where = f"{args.workers} local workers" if args.scheduler is None else f"the cluster at {args.scheduler}"
-        print(f"path: {path.duration:.1f} s, {frames} frames at {fps:g} fps, on {where}")
-        start = time.perf_counter()
-        backend_name = render_distributed(
-            level.scene, path, frames, size, out, backend=args.backend or default_backend_name(),
-            precision=args.precision, workers=args.workers, scheduler=args.scheduler, fps=fps, spp=spp,
-        )  # fmt: skip
-        elapsed = time.perf_counter() - start
-    finally:
-        level.close()
-    print(f"wrote {out}")
-    print(f"{frames} frames of {size[0]}x{size[1]} with the {backend_name} backend in {elapsed:.1f} s")
-    return 0
-
-
 def cmd_import_tello(args: argparse.Namespace) -> int:
     """``import-tello``: a TelloEngine scene file to our scene format (aberrant/importers/tello.py)."""
     from aberrant.importers.tello import import_tello
@@ -225,7 +46,7 @@ def cmd_import_tello(args: argparse.Namespace) -> int:
     scene_file = Path(args.scene_file)
     mesh_dir = Path(args.mesh_dir) if args.mesh_dir else Path(os.path.abspath(scene_file)).parent.parent / "Mesh"
     out = Path(args.out)
-    _check_output("--out", out)
+    check_target("--out", out)
     result = import_tello(scene_file, mesh_dir, out, checker=args.checker)
     result.scene.close()
     for warning in result.warnings:
@@ -245,7 +66,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in EXPORT_SUFFIXES:
         raise UsageError(f"{shorten(out)}: the output must be a .glb or .gltf file")
-    _check_output("OUT", out)
+    check_target("OUT", out)
     from components import Aberration, Mesh, Portal
 
     with open_level(args.scene) as level:
@@ -303,7 +124,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
         for path in written:
             print(f"wrote {path}")
         return 0
-    _check_cluster_args(args)
+    check_cluster_args(args)
     config = make_config(
         scenes=args.scenes, backends=args.backends, size=parse_size(args.size) if args.size else None,
         repeat=args.repeat, out=args.out, quick=args.quick, sweeps=args.sweeps, overhead=not args.no_overhead,
@@ -313,78 +134,6 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if args.workers is not None or args.scheduler is not None:
         return bench_command(config, workers=args.workers, scheduler=args.scheduler)
     return bench_command(config)
-
-
-def cmd_editor(args: argparse.Namespace) -> int:
-    """``editor``: the level editor with play mode (needs a display and ``pip install 'aberrant[editor]'``)."""
-    try:
-        from editor.model import EditorModel
-        from editor.window import EditorUnavailable, display_problem, run_editor
-    except ImportError as e:
-        raise UsageError(f"the editor needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
-    size = parse_size(args.size) if args.size is not None else None
-    problem = display_problem()
-    if problem is not None:
-        raise UsageError(problem)
-    from aberrant.levels import open_level
-
-    model = EditorModel()
-    watcher = None
-    if args.scene is not None:  # a bad file, module or name fails here, before a window opens
-        level = open_level(args.scene)
-        model = EditorModel(level.scene, level.file if level.kind == "scene" else None, demo=level.demo or level.label)
-        watcher = level_watcher(args.scene, level) if level.kind == "code" else None  # a scene file is the model's
-    try:
-        if size is None:
-            return run_editor(model, backend=args.backend, watcher=watcher)
-        return run_editor(model, backend=args.backend, size=size, watcher=watcher)
-    except EditorUnavailable as e:
-        raise UsageError(str(e)) from None
-
-
-def level_watcher(source: str, level: Level) -> LevelWatcher | None:
-    """Hot reload for a level read from a file (a demo has none to watch): rebuilt the way it was opened."""
-    from aberrant.levels import open_level
-    from editor.reload import LevelWatcher
-
-    if level.file is None:
-        return None
-    return LevelWatcher(level.file, lambda: open_level(source).scene, level.scene)
-
-
-def cmd_play(args: argparse.Namespace) -> int:
-    """``play``: walk (or fly through) a level in a window with no panels (needs a display and the editor extra)."""
-    try:
-        from editor.player import DEFAULT_SIZE, run_player
-        from editor.window import EditorUnavailable, display_problem
-    except ImportError as e:
-        raise UsageError(f"the player needs imgui-bundle and glfw: pip install 'aberrant[editor]' ({e})") from None
-    size = parse_size(args.size) if args.size is not None else DEFAULT_SIZE
-    problem = display_problem("player")
-    if problem is not None:
-        raise UsageError(problem)
-    from aberrant.levels import open_level
-    from engine.scene_writer import scene_document
-
-    record = Path(args.record) if args.record else None
-    if record is not None:
-        if record.suffix.lower() != ".json":
-            raise UsageError(f"--record {shorten(record)}: the camera path is saved in a scene file (.json)")
-        _check_output("--record", record)
-    with open_level(args.scene) as level:
-        watcher = level_watcher(args.scene, level)
-        template = None  # the recording goes into the level's own scene file, as it is on disk then
-        if record is not None:
-            template = scene_document(level.scene, Path(os.path.abspath(record)).parent)  # before play moves it
-        elif level.kind == "scene" and level.file is not None and level.file.suffix.lower() == ".json":
-            record = level.file
-        try:
-            return run_player(
-                level.scene, size=size, backend=args.backend, fly=args.fly, frames=args.frames, watcher=watcher,
-                record=record, record_template=template,
-            )  # fmt: skip
-        except EditorUnavailable as e:
-            raise UsageError(str(e)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:

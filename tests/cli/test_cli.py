@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from aberrant.cli import main, parse_size
+from aberrant.arguments import parse_size
+from aberrant.cli import main
 from engine.errors import AberrantError
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -498,12 +498,12 @@ def test_saving_into_a_folder_that_is_a_file(saved):
 def test_write_atomically_is_what_every_writer_shares():
     """Every writer goes through the one atomic writer (so these faults cover them all): the scene files
     (and with them the Tello importer's meshes), the CLI's images, flythrough GIFs."""
-    import aberrant.cli
     import aberrant.importers.tello
+    import aberrant.render_command
     import aberrant.sinks
     import engine.atomic_files
     import engine.scene_file
 
     assert aberrant.sinks.write_atomically is engine.scene_file.write_atomically is engine.atomic_files.write_atomically
     assert "with_files=" in Path(aberrant.importers.tello.__file__).read_text()
-    assert "write_atomically" in Path(aberrant.cli.__file__).read_text()
+    assert "write_atomically" in Path(aberrant.render_command.__file__).read_text()
