@@ -18,7 +18,7 @@ from editor.commands import AssetOp, Command, CreateOp, EntityRecord, Op, SetOp,
 from engine.assets import MESH_SUFFIXES
 from engine.errors import AberrantError
 from engine.maths import quat_from_euler_deg
-from engine.scene import AssetSpec
+from engine.scene_world import AssetSpec
 
 if TYPE_CHECKING:
     from engine.scene import Scene

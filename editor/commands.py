@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from components import Name, Portal
-from engine.scene import AssetSpec, Scene
+from engine.scene import Scene
+from engine.scene_world import AssetSpec
 from engine.settings import Settings
 
 

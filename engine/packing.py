@@ -34,7 +34,8 @@ from engine.normals import corner_normals
 from engine.packed import Features, PackedScene, TableUpdate
 from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
-from engine.scene import SETTINGS, Scene
+from engine.scene import Scene
+from engine.scene_world import SETTINGS
 from engine.textures import DEFAULT_BUDGET_MIB, pack_atlas
 from engine.tlas import FAT_MARGIN, AabbTree
 from engine.tlas_wide import WideTlas

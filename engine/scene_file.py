@@ -42,7 +42,8 @@ from engine.atomic_files import read_regular, write_atomically
 from engine.errors import AberrantError, SceneError, shorten
 from engine.keyframes import CameraPathError, Keyframe, checked_keyframes
 from engine.maths import look_at_quat, quat_from_euler_deg
-from engine.scene import AssetSpec, Scene
+from engine.scene import Scene
+from engine.scene_world import AssetSpec
 from engine.scene_writer import FORMAT, VERSION, dumps, scene_document, scene_to_json
 from engine.settings import Settings
 

@@ -19,7 +19,8 @@ from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from engine.errors import SceneError
 from engine.keyframes import Keyframe
 from engine.maths import quat_from_euler_deg, quat_to_euler_deg
-from engine.scene import AssetSpec, Scene
+from engine.scene import Scene
+from engine.scene_world import AssetSpec
 
 FORMAT = "aberrant-scene"
 VERSION = 1
