@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING
 
 from components import Aberration, Camera, Light, Mesh, Portal, Transform
 from editor.commands import AssetOp, Command, CreateOp, EntityRecord, Op, SetOp, capture
-from engine.assets import MESH_SUFFIXES
 from engine.errors import AberrantError
 from engine.maths import quat_from_euler_deg
+from engine.mesh_files import MESH_SUFFIXES
 from engine.scene_world import AssetSpec
 
 if TYPE_CHECKING:

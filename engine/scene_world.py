@@ -21,9 +21,10 @@ from typing import Any, TypeVar
 import esper
 
 from components import Mesh, Name, Portal, ValidationError
-from engine.assets import PRIMITIVES, AssetLibrary, MeshAsset
+from engine.assets import PRIMITIVES, AssetLibrary
 from engine.errors import SceneError
 from engine.keyframes import Keyframe
+from engine.mesh_asset import MeshAsset
 from engine.settings import Settings
 from engine.textures import TextureImage
 

@@ -45,9 +45,9 @@ import PIL.Image
 
 from aberrant.importers.gltf import unique_name
 from components import Aberration, Camera, Light, Mesh, Portal, Transform
-from engine.assets import MeshAsset
 from engine.atomic_files import write_atomically
 from engine.errors import AberrantError, SceneError, shorten
+from engine.mesh_asset import MeshAsset
 from engine.scene import Scene
 from engine.scene_writer import scene_document
 from engine.textures import TextureImage

@@ -15,7 +15,7 @@ from imgui_bundle import imgui
 
 from editor.model import EditorModel
 from editor.panels import widgets as ui
-from engine.assets import MESH_SUFFIXES
+from engine.mesh_files import MESH_SUFFIXES
 
 #: Dialog modes: title, suffixes listed, OK button label.
 MODES: dict[str, tuple[str, tuple[str, ...], str]] = {

@@ -20,7 +20,9 @@ from test_fuzz_scene_files import doc_with, run_cli
 
 from editor.play import PlaySession
 from engine import bvh_cache
-from engine.assets import AssetError, AssetLibrary, MeshAsset, as_utf8
+from engine.assets import AssetLibrary
+from engine.mesh_asset import AssetError, MeshAsset
+from engine.mesh_files import as_utf8
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene
 

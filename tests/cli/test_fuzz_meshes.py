@@ -33,8 +33,9 @@ from hypothesis import strategies as st
 
 from aberrant.cli import main
 from aberrant.importers.tello import read_mesh_resource
-from engine.assets import AssetError, AssetLibrary, MeshAsset, make_asset
+from engine.assets import AssetLibrary
 from engine.errors import AberrantError
+from engine.mesh_asset import AssetError, MeshAsset, make_asset
 from engine.scene_file import SceneFileError, load_scene
 
 ROOT = Path(__file__).resolve().parents[2]
