@@ -36,3 +36,28 @@ class SceneError(AberrantError, ValueError):
 
 class BackendUnavailable(AberrantError, RuntimeError):
     """A tracer backend cannot run here; the message says why and what to install."""
+
+
+class SceneFileError(AberrantError, ValueError):
+    """A scene file cannot be read or saved; the one-line message names file, entity and field."""
+
+    def __init__(
+        self,
+        file: str,
+        message: str,
+        *,
+        entity: str | None = None,
+        field: str | None = None,
+        kind: str | None = "entity",
+    ) -> None:
+        parts = [file]
+        if entity is not None:
+            parts.append(f"{kind} {entity!r}" if kind else entity)
+        if field is not None:
+            parts.append(f"field {field!r}")
+        super().__init__(": ".join([*parts, message]))
+        self.file = file
+        self.entity = entity
+        self.field = field
+        self.kind = kind
+        self.detail = message
