@@ -14,7 +14,7 @@ from typing import SupportsIndex, cast
 from backends.base import AOVS, Backend, Frame, create_backend
 from backends.samples import check_spp
 from engine.errors import AberrantError
-from engine.layout import Precision
+from engine.records import Precision
 from engine.scene import Scene
 from systems.app import DEFAULT_SIZE, render_once
 

@@ -20,8 +20,8 @@ import numpy as np
 
 from engine.camera_view import CameraView
 from engine.errors import AberrantError, BackendUnavailable
-from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
+from engine.records import Precision
 
 #: Outputs a backend can write (docs/semantics.md, "What a frame holds").
 AOVS: tuple[str, ...] = ("color", "depth", "perceived", "instance", "events")

@@ -22,7 +22,7 @@ from backends.base import BACKENDS, Backend, Frame, backend_class, create_backen
 from backends.samples import ColorAccumulator, sample_camera
 from backends.upload import SceneUploader
 from engine.camera_view import CameraView
-from engine.layout import Precision
+from engine.records import Precision
 from engine.scene import Scene
 
 if TYPE_CHECKING:

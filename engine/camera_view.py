@@ -14,8 +14,8 @@ import numpy as np
 from components import Camera, Transform
 from engine import layout
 from engine.box_clearance import camera_clearance
-from engine.layout import Precision
 from engine.maths import quat_to_matrix
+from engine.records import Precision
 from engine.scene import Scene
 from engine.tlas import rows_at
 from engine.tlas_wide import TlasLanes

@@ -33,104 +33,24 @@ follows), plus the table's row in :data:`TABLES` and :func:`table_dtype`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal
-
 import numpy as np
 
 from components.light import MAX_LIGHTS
-
-Precision = Literal["f32", "f64"]
-PRECISIONS: tuple[Precision, ...] = ("f32", "f64")
-
-#: A field's vector type in the kernels: ``real4`` follows the precision, the others are always 32-bit;
-#: ``float8`` / ``int8`` exist in OpenCL C only (two 4-vector rows on the host).
-Kind = Literal["real4", "float4", "int4", "float8", "int8"]
-_LANES: dict[str, int] = {"real4": 4, "float4": 4, "int4": 4, "float8": 8, "int8": 8}
-
-
-@dataclass(frozen=True)
-class Field:
-    """One field of a record: a dtype field and the kernel struct member(s) reading its bytes.
-
-    ``rows > 1``: a matrix of 4-vector rows, the members ``member0``, ``member1``, ... (``member``
-    defaults to ``name``). ``w``: a ``float4`` whose ``w`` holds an int32 bit pattern (the kernel reads
-    it with ``AS_INT``); the host sees ``name`` as three float32 and ``w`` as an int32 field.
-    """
-
-    name: str
-    kind: Kind
-    rows: int = 1
-    member: str = ""
-    w: str = ""
-
-    def kernel_members(self) -> list[tuple[str, str]]:
-        """(kernel type, member name) of each vector this field is in the kernel's struct."""
-        member = self.member or self.name
-        if self.rows == 1:
-            return [(self.kind, member)]
-        return [(self.kind, f"{member}{row}") for row in range(self.rows)]
-
-
-@dataclass(frozen=True)
-class Record:
-    """A packed record, declared once: ``struct`` is its name in the kernels, ``fields`` its vectors in order."""
-
-    struct: str
-    fields: tuple[Field, ...]
-
-    def dtype(self, precision: Precision = "f32") -> np.dtype:
-        """The record's dtype: each vector at its std430 offset, the whole padded to its widest vector."""
-        real = np.float64 if precision == "f64" else np.float32
-        names: list[str] = []
-        formats: list[object] = []
-        offsets: list[int] = []
-        offset = 0
-        align = 16
-        for field in self.fields:
-            base = np.dtype(real if field.kind == "real4" else np.int32 if field.kind.startswith("int") else np.float32)
-            lanes = _LANES[field.kind]
-            size = lanes * base.itemsize
-            align = max(align, size)
-            offset = -(-offset // size) * size
-            if field.w:
-                if field.kind != "float4" or field.rows != 1:  # pragma: no cover - a programming error in this file
-                    raise ValueError(f"{self.struct}.{field.name}: only a single float4 has an int w")
-                names += [field.name, field.w]
-                formats += [(np.float32, (3,)), np.int32]
-                offsets += [offset, offset + 12]
-            else:
-                shape = (field.rows, 4) if field.rows > 1 else (lanes // 4, 4) if lanes > 4 else (4,)
-                names.append(field.name)
-                formats.append((base, shape))
-                offsets.append(offset)
-            offset += size * field.rows
-        itemsize = -(-offset // align) * align
-        return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": itemsize})
-
-    def kernel_members(self) -> list[tuple[str, str]]:
-        """(kernel type, member name) of the struct's members, in order."""
-        return [member for field in self.fields for member in field.kernel_members()]
-
-
-def _vectors(kind: Kind, *names: str) -> tuple[Field, ...]:
-    """Fields of one kind, one vector each."""
-    return tuple(Field(name, kind) for name in names)
-
+from engine.records import Field, Precision, Record, vectors
 
 # --- 32-bit tables -----------------------------------------------------------
 
 #: One triangle of a mesh asset, object space. ``w`` components are unused.
-TRIANGLE = Record("Triangle", _vectors("float4", "v0", "v1", "v2"))
+TRIANGLE = Record("Triangle", vectors("float4", "v0", "v1", "v2"))
 TRIANGLE_DTYPE = TRIANGLE.dtype()
 
 #: Texture coordinates of a triangle: ``uv01 = (u0, v0, u1, v1)``, ``uv2 = (u2, v2, 0, 0)``.
-TRIANGLE_UV = Record("TriangleUv", _vectors("float4", "uv01", "uv2"))
+TRIANGLE_UV = Record("TriangleUv", vectors("float4", "uv01", "uv2"))
 TRIANGLE_UV_DTYPE = TRIANGLE_UV.dtype()
 
 #: Object-space vertex normals of a triangle (``w`` unused), for smooth shading: packed only for the assets
 #: a smooth mesh uses, row ``triangle + material.texture.w`` (``engine.normals``).
-TRIANGLE_NORMAL = Record("TriangleNormal", _vectors("float4", "n0", "n1", "n2"))
+TRIANGLE_NORMAL = Record("TriangleNormal", vectors("float4", "n0", "n1", "n2"))
 TRIANGLE_NORMAL_DTYPE = TRIANGLE_NORMAL.dtype()
 
 #: One texel of the scene's texture atlas: linear ``rgba`` in [0, 1] (8-bit values / 255). Each texture is
@@ -162,7 +82,7 @@ BVH_NODE_DTYPE = BVH_NODE.dtype()
 #: order. Bounds are rounded outward; indices are absolute in the packed scene.
 BVH4_NODE = Record(
     "Bvh4Node",
-    (*_vectors("float4", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *_vectors("int4", "child", "count")),
+    (*vectors("float4", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *vectors("int4", "child", "count")),
 )
 BVH4_NODE_DTYPE = BVH4_NODE.dtype()
 
@@ -170,7 +90,7 @@ BVH4_NODE_DTYPE = BVH4_NODE.dtype()
 #: watertight test runs on four at once. ``index`` holds each lane's row in ``triangles`` (shading and
 #: ties use it), -1 for a padding lane. Only built with ``bvh_width=4``, whose leaves point at blocks.
 TRIANGLE_BLOCK = Record(
-    "TriangleBlock", (*_vectors("float4", *(f"v{k}{axis}" for k in range(3) for axis in "xyz")), Field("index", "int4"))
+    "TriangleBlock", (*vectors("float4", *(f"v{k}{axis}" for k in range(3) for axis in "xyz")), Field("index", "int4"))
 )
 TRIANGLE_BLOCK_DTYPE = TRIANGLE_BLOCK.dtype()
 
@@ -184,7 +104,7 @@ TRIANGLE_BLOCK_DTYPE = TRIANGLE_BLOCK.dtype()
 #: ``count == 0``, the record ``index``. Each asset's records start with a header:
 #: ``child0 = (origin.xyz bits, root link)``, ``child1 = (scale.xyz bits, -1)``; its root box is
 #: the whole grid. Indices are absolute in the packed scene.
-BVH_COMPACT_NODE = Record("BvhCompactNode", _vectors("int4", "child0", "child1"))
+BVH_COMPACT_NODE = Record("BvhCompactNode", vectors("int4", "child0", "child1"))
 BVH_COMPACT_NODE_DTYPE = BVH_COMPACT_NODE.dtype()
 
 #: Bits of a compact link below its index: leaf counts up to 64 (``BvhParams.max_leaf_size``).
@@ -198,7 +118,7 @@ BVH_GRID_MAX = 65535
 #: multiple of 32). Leaves name ``ceil(count / 4)`` rows of ``triangle_blocks``, as with width 4.
 BVH8_NODE = Record(
     "Bvh8Node",
-    (*_vectors("float8", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *_vectors("int8", "child", "count")),
+    (*vectors("float8", "lo_x", "lo_y", "lo_z", "hi_x", "hi_y", "hi_z"), *vectors("int8", "child", "count")),
 )
 BVH8_NODE_DTYPE = BVH8_NODE.dtype()
 
@@ -257,7 +177,7 @@ MATERIAL_DTYPE = MATERIAL.dtype()
 SETTINGS = Record(
     "Settings",
     (
-        *_vectors("float4", "background", "light_dir", "event_limit_color", "shading"),
+        *vectors("float4", "background", "light_dir", "event_limit_color", "shading"),
         Field("counts", "int4"),
         Field("space_roots", "int4"),
         Field("lights", "int4"),
@@ -276,7 +196,7 @@ INSTANCE = Record(
     "Instance",
     (
         Field("world_to_object", "real4", 3, member="w2o"),
-        *_vectors("real4", "bounds_min", "bounds_max"),
+        *vectors("real4", "bounds_min", "bounds_max"),
         Field("meta", "int4"),
     ),
 )
@@ -319,7 +239,7 @@ PORTAL = Record(
 CAMERA = Record(
     "Camera",
     (
-        *_vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens", "subpixel"),
+        *vectors("real4", "position", "right", "up", "back", "origin", "sigma_min", "sigma_max", "lens", "subpixel"),
         Field("size", "int4"),
     ),
 )

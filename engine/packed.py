@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine.layout import Precision
+from engine.records import Precision
 
 __all__ = ["Features", "PackedScene", "TableUpdate"]
 

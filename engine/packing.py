@@ -28,12 +28,12 @@ from engine.bvh_cache import cached_bvh
 from engine.bvh_compact import compact, offset_compact
 from engine.bvh_wide import leaf_blocks
 from engine.camera_view import scene_camera
-from engine.layout import Precision
 from engine.maths import normalize
 from engine.normals import corner_normals
 from engine.packed import Features, PackedScene, TableUpdate
 from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
+from engine.records import Precision
 from engine.scene import Scene
 from engine.scene_world import SETTINGS
 from engine.textures import DEFAULT_BUDGET_MIB, pack_atlas

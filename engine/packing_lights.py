@@ -6,8 +6,8 @@ import numpy as np
 
 from components import Light, Transform
 from engine import layout
-from engine.layout import Precision
 from engine.maths import normalize, rotate
+from engine.records import Precision
 from engine.scene import Scene
 
 

@@ -20,8 +20,8 @@ from components import Aberration, Portal, Transform
 from engine import layout
 from engine.affine_batch import compose_affine, transform_arrays, trs_forward, trs_inverse_batch
 from engine.clearances import BoxClearances
-from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
+from engine.records import Precision
 from engine.scene import Scene
 from engine.space_wide import ROWS, WideTree, reserved_rows
 from engine.tlas import FAT_MARGIN, SPACE_SLACK, AabbTree

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from backends.base import Backend, backend_class, probe
-from engine.layout import Precision
+from engine.records import Precision
 from engine.scene import Scene
 
 os.environ.setdefault("ABERRANT_CACHE_DIR", str(Path(__file__).resolve().parent.parent / ".cache" / "aberrant"))

@@ -24,8 +24,8 @@ from backends.base import AOVS, Backend, Frame, backend_class
 from components import Transform
 from engine.camera_view import CameraView
 from engine.input import NoInput
-from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
+from engine.records import Precision
 from engine.scene import Scene
 from systems.app import App
 

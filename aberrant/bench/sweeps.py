@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from engine.errors import AberrantError
-from engine.layout import Precision
+from engine.records import Precision
 
 #: Every sweep, with what it varies (the report lists these).
 SWEEPS: dict[str, str] = {

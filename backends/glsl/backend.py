@@ -37,8 +37,8 @@ from backends.glsl.tables import (
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
-from engine.layout import Precision
 from engine.packed import Features, PackedScene, TableUpdate
+from engine.records import Precision
 
 if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
     import moderngl

@@ -16,8 +16,9 @@ from backends.reference.trace import Space, TraceResult, shadow_rays_lit, trace
 from backends.reference.traverse import Geometry
 from engine.camera_view import CameraView
 from engine.errors import AberrantError
-from engine.layout import Precision, bvh_compact, bvh_width
+from engine.layout import bvh_compact, bvh_width
 from engine.packed import Features, PackedScene, TableUpdate
+from engine.records import Precision
 
 #: Tables converted to float64 on upload: mesh data (once per asset set) and per-entity rows.
 _MESH_TABLES = ("triangles", "triangle_uvs", "bvh_nodes", "triangle_normals", "texels")

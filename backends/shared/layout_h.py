@@ -11,7 +11,7 @@ from __future__ import annotations
 from functools import cache
 
 from engine import layout
-from engine.layout import Record
+from engine.records import Record
 
 _HEADER = """\
 /* layout.h -- the packed scene records, written by backends/shared/layout_h.py from engine/layout.py's

@@ -14,7 +14,7 @@ import pytest
 from scenes import layout_members
 
 from backends import shared
-from engine import layout
+from engine import layout, records
 
 #: Bytes and scalar type of each kernel vector type, by precision (real4 follows it).
 _VECTORS = {
@@ -41,9 +41,9 @@ def _byte_types(dtype: np.dtype) -> list[str]:
     return types
 
 
-@pytest.mark.parametrize("precision", layout.PRECISIONS)
+@pytest.mark.parametrize("precision", records.PRECISIONS)
 @pytest.mark.parametrize("record", layout.RECORDS, ids=[r.struct for r in layout.RECORDS])
-def test_each_struct_covers_its_dtype_byte_for_byte(record: layout.Record, precision: str) -> None:
+def test_each_struct_covers_its_dtype_byte_for_byte(record: records.Record, precision: str) -> None:
     """Member by member at std430 offsets, the struct's scalars are the dtype's, and its size is the dtype's."""
     dtype = record.dtype(precision)  # type: ignore[arg-type]
     types = _byte_types(dtype)
@@ -65,9 +65,9 @@ def test_each_struct_covers_its_dtype_byte_for_byte(record: layout.Record, preci
 
 def test_every_table_has_its_record() -> None:
     """Each table's dtype, and each bvh_nodes variant's, is a declared record's: no table lacks its struct."""
-    dtypes = {(record.dtype(p), p) for record in layout.RECORDS for p in layout.PRECISIONS}
+    dtypes = {(record.dtype(p), p) for record in layout.RECORDS for p in records.PRECISIONS}
     for table in (*layout.TABLES, "camera"):
-        for precision in layout.PRECISIONS:
+        for precision in records.PRECISIONS:
             assert (layout.table_dtype(table, precision), precision) in dtypes, table
     for dtype in (*layout.BVH_WIDTHS.values(), layout.BVH_COMPACT_NODE_DTYPE):
         assert (dtype, "f32") in dtypes
@@ -115,8 +115,10 @@ def test_texel_readers_skip_the_padding_before_a_real4_at_f64(precision: str) ->
     """A real4 after an odd number of 16-byte vectors starts at the next 32 bytes at f64: its reader looks there."""
     from backends.shared.layout_h import texel_reader
 
-    fields = [layout.Field(name, kind) for name, kind in zip("abcd", ("int4", "real4", "float4", "real4"), strict=True)]
-    record = layout.Record("Probe", tuple(fields))
+    fields = [
+        records.Field(name, kind) for name, kind in zip("abcd", ("int4", "real4", "float4", "real4"), strict=True)
+    ]
+    record = records.Record("Probe", tuple(fields))
     r4_texels = 2 if precision == "f64" else 1
     texels = []
     for part in texel_reader(record).split("_AT_(img, ")[1:]:

@@ -25,9 +25,9 @@ from test_parity_aberrations import (
 
 from backends.base import AOVS
 from engine.camera_view import CAMERA_BOX_PER_RAY, camera_box, pack_camera, scene_camera
-from engine.layout import Precision
 from engine.packed import PackedScene, TableUpdate
 from engine.packing import ScenePacker
+from engine.records import Precision
 from engine.scene import Scene
 
 FAST = [

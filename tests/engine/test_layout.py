@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine import layout
-from engine.layout import Precision
+from engine import layout, records
+from engine.records import Precision
 
 # Expected (offset, size) per field, written out by hand from the std430 rules:
 # a vec4 of 4-byte scalars aligns to 16, a dvec4 to 32; a struct's size rounds
@@ -96,7 +96,7 @@ def test_offsets_and_sizes(table: str, precision: Precision) -> None:
 
 
 @pytest.mark.parametrize("table", [*layout.TABLES, "camera"])
-@pytest.mark.parametrize("precision", layout.PRECISIONS)
+@pytest.mark.parametrize("precision", records.PRECISIONS)
 def test_records_are_whole_vectors(table: str, precision: str) -> None:
     """Every record is a multiple of its vector alignment, so arrays of them need no padding."""
     dtype = layout.table_dtype(table, precision)
