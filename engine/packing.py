@@ -24,19 +24,16 @@ from components import Mesh, Transform
 from engine import layout
 from engine.affine_batch import transform_arrays, trs_forward, trs_inverse_batch
 from engine.bvh import BvhParams
-from engine.bvh_cache import cached_bvh
-from engine.bvh_compact import compact, offset_compact
-from engine.bvh_wide import leaf_blocks
 from engine.camera_view import scene_camera
 from engine.maths import normalize
-from engine.normals import corner_normals
 from engine.packed import Features, PackedScene, TableUpdate
+from engine.packing_geometry import pack_geometry
 from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
 from engine.records import Precision
 from engine.scene import Scene
 from engine.scene_world import SETTINGS
-from engine.textures import DEFAULT_BUDGET_MIB, pack_atlas
+from engine.textures import DEFAULT_BUDGET_MIB
 from engine.tlas import FAT_MARGIN, AabbTree
 from engine.tlas_wide import WideTlas
 
@@ -106,6 +103,7 @@ class ScenePacker:
         self._scene_world: str | None = None
         self._instance_row: dict[int, int] = {}
         self._asset_roots: dict[str, int] = {}
+        self._asset_flags: dict[str, int] = {}
         self.tlas_margin = tlas_margin
         #: The top-level tree over the instance rows (``tlas_nodes``), kept in step with them.
         self.tlas = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
@@ -216,10 +214,6 @@ class ScenePacker:
         texture = scene.texture(mesh) if asset.uvs is not None else None
         return texture is None or texture.content_hash in self._texture_first
 
-    def _node_dtype(self) -> np.dtype:
-        """The ``bvh_nodes`` dtype this packer writes."""
-        return layout.BVH_COMPACT_NODE_DTYPE if self.bvh_compact else layout.BVH_WIDTHS[self.bvh_width]
-
     def _resync(self, scene: Scene, camera_position: np.ndarray) -> list[TableUpdate]:
         self.packed = None
         return self.sync(scene, camera_position)
@@ -231,57 +225,11 @@ class ScenePacker:
         old_versions = self.packed.versions if self.packed is not None else {}
         meshes = scene.query(Transform, Mesh)
         self._instance_row = {entity: row for row, (entity, _) in enumerate(meshes)}
-        tris, uvs, nodes, blocks = [], [], [], []
-        self._asset_roots = {}
-        self._asset_flags: dict[str, int] = {}
-        orders: dict[str, tuple[int, np.ndarray]] = {}  # each asset's first triangle row and triangle order
-        node_base = tri_base = block_base = 0
-        for _, (_, mesh) in meshes:
-            asset = scene.asset(mesh.asset)
-            if asset.content_hash in self._asset_roots:
-                continue
-            bvh = cached_bvh(asset.vertices, asset.faces, self.bvh_params, width=self.bvh_width)
-            faces = asset.faces[bvh.triangle_order]
-            t = np.zeros(len(faces), dtype=layout.TRIANGLE_DTYPE)
-            for k, name in enumerate(("v0", "v1", "v2")):
-                t[name][:, :3] = asset.vertices[faces[:, k]]
-            u = np.zeros(len(faces), dtype=layout.TRIANGLE_UV_DTYPE)
-            if asset.uvs is not None:
-                u["uv01"][:, :2] = asset.uvs[faces[:, 0]]
-                u["uv01"][:, 2:] = asset.uvs[faces[:, 1]]
-                u["uv2"][:, :2] = asset.uvs[faces[:, 2]]
-            if self.bvh_compact:
-                n = offset_compact(compact(bvh), node_base, tri_base)
-            elif self.bvh_width == 2:
-                n = bvh.nodes.copy()
-                n["first"] += np.where(n["count"] > 0, tri_base, node_base)
-            else:  # leaves point at their blocks of 4 triangles; empty slots (count < 0) keep child 0
-                n = bvh.nodes.copy()
-                lanes, child = leaf_blocks(bvh)
-                n["child"] = child + np.where(n["count"] > 0, block_base, np.where(n["count"] == 0, node_base, 0))
-                b = np.zeros(len(lanes), dtype=layout.TRIANGLE_BLOCK_DTYPE)
-                for k in range(3):
-                    for a, axis in enumerate("xyz"):
-                        b[f"v{k}{axis}"] = np.where(lanes >= 0, t[f"v{k}"][np.maximum(lanes, 0), a], 0.0)
-                b["index"] = np.where(lanes >= 0, lanes + tri_base, -1)
-                blocks.append(b)
-                block_base += len(b)
-            self._asset_roots[asset.content_hash] = node_base
-            orders[asset.content_hash] = (tri_base, bvh.triangle_order)
-            self._asset_flags[asset.content_hash] = layout.INSTANCE_FLAG_HAS_UVS if asset.uvs is not None else 0
-            tris.append(t)
-            uvs.append(u)
-            nodes.append(n)
-            node_base += len(n)
-            tri_base += len(t)
-        tables = {
-            "triangles": np.concatenate(tris) if tris else np.zeros(0, layout.TRIANGLE_DTYPE),
-            "triangle_uvs": np.concatenate(uvs) if uvs else np.zeros(0, layout.TRIANGLE_UV_DTYPE),
-            "bvh_nodes": np.concatenate(nodes) if nodes else np.zeros(0, self._node_dtype()),
-            "triangle_blocks": np.concatenate(blocks) if blocks else np.zeros(0, layout.TRIANGLE_BLOCK_DTYPE),
-            "triangle_normals": self._pack_normals(scene, [m for _, (_, m) in meshes], orders),
-            "texels": self._pack_texels(scene, meshes),
-        }
+        geometry = pack_geometry(scene, meshes, self.bvh_params, self.bvh_width, self.bvh_compact,
+                                 self.texture_budget_mib)  # fmt: skip
+        self._asset_roots, self._asset_flags = geometry.roots, geometry.flags
+        self._normal_offset, self._texture_first = geometry.normal_offset, geometry.texture_first
+        tables = geometry.tables
         counts = {name: len(t) for name, t in tables.items()}
         tables = {name: _at_least_one_row(t) for name, t in tables.items()}
         features = Features(textures=bool(self._texture_first), smooth=bool(self._normal_offset))
@@ -303,36 +251,6 @@ class ScenePacker:
         self.packed.tables["lights"], self.packed.counts["lights"] = pack_lights(
             scene, self.packed.origin, self.precision
         )
-
-    def _pack_normals(self, scene: Scene, meshes: list[Mesh], orders: dict[str, tuple[int, np.ndarray]]) -> np.ndarray:
-        """Corner normals of each (asset, crease angle) a smooth mesh uses, in its triangles' packed order."""
-        self._normal_offset = {}
-        chunks: list[np.ndarray] = []
-        base = 0
-        for mesh in meshes:
-            asset = scene.asset(mesh.asset)
-            key = (asset.content_hash, mesh.crease_deg)
-            if not mesh.smooth or key in self._normal_offset:
-                continue
-            tri_base, order = orders[asset.content_hash]
-            corners = corner_normals(asset.vertices, asset.faces, mesh.crease_deg, asset.normals)[order]
-            rows = np.zeros(len(corners), dtype=layout.TRIANGLE_NORMAL_DTYPE)
-            for k, name in enumerate(("n0", "n1", "n2")):
-                rows[name][:, :3] = corners[:, k]
-            self._normal_offset[key] = base - tri_base
-            chunks.append(rows)
-            base += len(rows)
-        return np.concatenate(chunks) if chunks else np.zeros(0, layout.TRIANGLE_NORMAL_DTYPE)
-
-    def _pack_texels(self, scene: Scene, meshes: list[tuple[int, tuple[Transform, Mesh]]]) -> np.ndarray:
-        """Every distinct texture the meshes sample, in one table within the texel budget."""
-        images = []
-        for entity, (_, mesh) in meshes:
-            texture = scene.texture(mesh) if scene.asset(mesh.asset).uvs is not None else None
-            if texture is not None:
-                images.append((f"{scene.name_of(entity)}.mesh.texture", texture))
-        table, self._texture_first = pack_atlas(images, self.texture_budget_mib)
-        return table
 
     def _pack_settings(self, scene: Scene) -> None:
         assert self.packed is not None
