@@ -10,7 +10,8 @@ tick), :mod:`.runner` (the run), :mod:`.report` and :mod:`.plot` (the outputs).
 from __future__ import annotations
 
 from aberrant.bench.command import bench_command
-from aberrant.bench.runner import BenchConfig, make_config, rerender, run_bench, write_outputs
+from aberrant.bench.results import rerender, write_outputs
+from aberrant.bench.runner import BenchConfig, make_config, run_bench
 
 # The modules are listed too, so that the API reference documents them.
 __all__ = [

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from typing import TextIO
 
-from aberrant.bench.runner import BenchConfig, run_bench, write_outputs
+from aberrant.bench.results import write_outputs
+from aberrant.bench.runner import BenchConfig, run_bench
 from aberrant.bench.spread import run_bench_on_cluster
 from aberrant.progress import clock
 

@@ -1,15 +1,11 @@
 """``aberrant bench``: every chosen backend and setting on every chosen scene, then the report, all at once.
 
-The run measures (cells, Embree, engine overhead), then renders
-``report.md``, ``results.json`` and ``speed_vs_error.png`` (and
-``space_count.png`` when the run measured that sweep) in memory and writes
-them through temporary files and renames: an interrupted or failed run
-never leaves a half-written report beside an old plot.
+The run measures (cells, Embree, engine overhead) into the results document that
+:mod:`aberrant.bench.results` writes out as the report, ``results.json`` and the plots.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -22,28 +18,22 @@ from typing import Any, TextIO
 from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info, scene_info
-from aberrant.bench.merge import FORMAT, merge_results, read_results
 from aberrant.bench.metrics import compare
 from aberrant.bench.overhead import measure_overhead
-from aberrant.bench.paired import SPACE_PLOT, has_space
-from aberrant.bench.plot import plot_png, space_plot_png
 from aberrant.bench.reference import ReferenceCache, render_ahead
-from aberrant.bench.report import render_report
+from aberrant.bench.results import document, embree_ratio, stamp
 from aberrant.bench.scenes import SceneSpec, resolve_scenes
 from aberrant.bench.sweeps import IMAGE_SWEEPS, QUICK_SWEEPS, Setting, check_sweeps, settings_for
 from aberrant.progress import Progress
 from backends.base import BACKENDS, backend_class
 from backends.samples import check_spp
-from engine.atomic_files import write_atomically
 from engine.camera_view import scene_camera
 from engine.errors import AberrantError, BackendUnavailable
 from engine.scene import Scene
 
-VERSION = 1
 DEFAULT_BACKENDS: tuple[str, ...] = ("glsl", "opencl")
 FULL_SIZE, QUICK_SIZE = (800, 800), (96, 72)
 FULL_REPEAT, QUICK_REPEAT = 5, 3
-OUTPUTS: tuple[str, ...] = ("report.md", "results.json", "speed_vs_error.png")
 
 
 @dataclass
@@ -286,7 +276,7 @@ def measure_scene(
             row = cells.run(scene, camera, setting, size, _pair(anchor, scene_anchor, setting, size), plain,
                             spec.spp[1] if spec.spp else None, not spec.base_only)  # fmt: skip
             row["scene"] = spec.name
-            _ratio(row, scene_anchor)
+            embree_ratio(row, scene_anchor)
             rows.append(row)
             progress.step(f"{spec.name}: {setting.label}")
     finally:
@@ -337,7 +327,8 @@ def run_bench(config: BenchConfig, stream: TextIO | None = None) -> dict[str, An
         if anchor is not None:
             anchor.close()
     machine["load_average"] = {"start": load_start, "end": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
-    results = document(config, started, settings, scenes, anchors, rows, overhead, {machine["name"]: machine})
+    machines = {machine["name"]: machine}
+    results = document(config.as_dict(), started, settings, scenes, anchors, rows, overhead, machines)
     results["reference_cache"] = {"folder": str(refs.folder), "hits": refs.hits, "misses": refs.misses}
     return results
 
@@ -350,96 +341,3 @@ def overhead_row(name: str) -> dict[str, Any]:
         return {"backend": name, "status": f"unsupported: {' '.join(str(e).split())}"}
     except Exception as e:  # recorded, never fatal
         return {"backend": name, "status": f"error: {type(e).__name__}: {e}"}
-
-
-def stamp(rows: list[dict[str, Any]], machine: dict[str, Any]) -> list[dict[str, Any]]:
-    """Each row told the machine and the device it ran on (results from several machines stay apart)."""
-    for row in rows:
-        info = machine["backends"].get(row["backend"], {})
-        row["machine"] = machine["name"]
-        row["device"] = info.get("unavailable") or info.get("renderer") or info.get("device") or "?"
-    return rows
-
-
-def document(
-    config: BenchConfig,
-    started: float,
-    settings: list[Setting],
-    scenes: dict[str, Any],
-    anchors: dict[str, Any],
-    rows: list[dict[str, Any]],
-    overhead: list[dict[str, Any]],
-    machines: dict[str, dict[str, Any]],
-) -> dict[str, Any]:
-    """The results document; ``machine`` is the first machine's facts, ``machines`` every one's by name."""
-    return {
-        "format": FORMAT,
-        "version": VERSION,
-        "started": time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(started)),
-        "duration_s": time.time() - started,
-        "config": config.as_dict(),
-        "machine": next(iter(machines.values())),
-        "machines": machines,
-        "settings": [s.as_dict() for s in settings],
-        "scenes": scenes,
-        "embree": anchors,
-        "rows": rows,
-        "overhead": overhead,
-    }
-
-
-def _ratio(row: dict[str, Any], anchor: dict[str, Any]) -> None:
-    """The row's rays/s as a multiple of Embree's on the same scene and size (or why there is none)."""
-    if anchor.get("status") != "ok":
-        row["embree_ratio"], row["embree_note"] = None, anchor.get("status")
-        return
-    entry = anchor["sizes"].get(f"{row['size'][0]}x{row['size'][1]}", {})
-    if row.get("status") != "ok" or entry.get("status") != "ok":
-        row["embree_ratio"], row["embree_note"] = None, entry.get("status", "no embree run at this size")
-        return
-    paired = row.get("embree_paired") or {}
-    if paired.get("shadows_off"):  # paired on the frame without shadow rays: its median, not the lit one's
-        width, height = row["size"]
-        row["embree_ratio"] = embree.mrays(paired["frame_ms"], width * height) / entry["mrays_per_s"]
-        row["embree_note"] = "shadows off for the pairing"
-        return
-    row["embree_ratio"] = row["mrays_per_s"] / entry["mrays_per_s"]
-    row["embree_note"] = ""
-
-
-def _clean(value: Any) -> Any:
-    """Strict JSON: NaN and infinities become null."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_clean(v) for v in value]
-    return value
-
-
-def write_outputs(results: dict[str, Any], out: Path) -> list[Path]:
-    """Render the report and the plots, then write the files atomically.
-
-    ``space_count.png`` is written when the run measured the space-count sweep; otherwise an earlier run's is
-    removed, so the folder never holds a plot its report does not show.
-    """
-    out.mkdir(parents=True, exist_ok=True)
-    png, plot_note = plot_png(results)
-    results["plot_note"] = plot_note
-    text = render_report(results)
-    data = json.dumps(_clean(results), indent=1, allow_nan=False).encode()
-    files = dict(zip([out / name for name in OUTPUTS], (text.encode(), data, png), strict=True))
-    space_plot = out / SPACE_PLOT
-    if has_space(results):
-        files[space_plot] = space_plot_png(results)
-    write_atomically(files)
-    if not has_space(results):
-        space_plot.unlink(missing_ok=True)
-    return list(files)
-
-
-def rerender(results_paths: Path | list[Path], out: Path) -> list[Path]:
-    """Write the report and plot again from earlier runs' results.json (no measuring); several are merged."""
-    paths = [Path(results_paths)] if isinstance(results_paths, str | os.PathLike) else [Path(p) for p in results_paths]
-    return write_outputs(merge_results([(path, read_results(path)) for path in paths]), out)

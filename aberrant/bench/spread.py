@@ -24,15 +24,14 @@ from aberrant.bench import embree
 from aberrant.bench.cells import CellRunner
 from aberrant.bench.facts import machine_info
 from aberrant.bench.reference import ReferenceCache
+from aberrant.bench.results import document, stamp
 from aberrant.bench.runner import (
     BenchConfig,
-    document,
     image_errors,
     measure_scene,
     overhead_row,
     plan,
     scene_cells,
-    stamp,
 )
 from aberrant.bench.scenes import SceneSpec
 from aberrant.bench.sweeps import Setting
@@ -165,7 +164,7 @@ def run_bench_on_cluster(
         rows += result["rows"]
         hits += result["reference_cache"]["hits"]
         misses += result["reference_cache"]["misses"]
-    results = document(config, started, settings, scenes, anchors, rows, overhead, machines)
+    results = document(config.as_dict(), started, settings, scenes, anchors, rows, overhead, machines)
     folder = done[futures[0].key]["reference_cache"]["folder"] if futures else ""
     results["reference_cache"] = {"folder": folder, "hits": hits, "misses": misses}
     results["spans"] = [done[future.key]["span"] for future in futures]  # when each task had its machine

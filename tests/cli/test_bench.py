@@ -22,7 +22,8 @@ from PIL import Image
 from aberrant.bench import embree, metrics, plot, reference
 from aberrant.bench.facts import cpu_generation
 from aberrant.bench.metrics import Timing, compare, geometric_mean, instance_mismatch, pareto_front, relative_error
-from aberrant.bench.runner import make_config, run_bench, write_outputs
+from aberrant.bench.results import write_outputs
+from aberrant.bench.runner import make_config, run_bench
 from aberrant.bench.scenes import QUICK_SCENES, bench_scenes, ten_boxes
 from aberrant.bench.sweeps import check_sweeps, settings_for
 from aberrant.cli import main

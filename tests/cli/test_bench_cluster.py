@@ -11,7 +11,8 @@ import pytest
 pytest.importorskip("distributed")
 
 import aberrant.cluster as cluster
-from aberrant.bench.runner import make_config, run_bench, write_outputs
+from aberrant.bench.results import write_outputs
+from aberrant.bench.runner import make_config, run_bench
 from aberrant.bench.spread import run_bench_on_cluster
 from aberrant.cli import main
 

@@ -9,7 +9,8 @@ import math
 from conftest import require_backend
 
 from aberrant.bench import features, plot
-from aberrant.bench.runner import make_config, run_bench, write_outputs
+from aberrant.bench.results import write_outputs
+from aberrant.bench.runner import make_config, run_bench
 from aberrant.bench.scenes import resolve_scenes
 from aberrant.bench.sweeps import settings_for
 from components import Light, Mesh
