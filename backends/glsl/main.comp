@@ -1,5 +1,5 @@
 /* main.comp -- the GLSL compute entry point (after prelude, layout.h, bindings.glsl and the shared
- * tracer files, core.h to pixel.h).
+ * tracer files, options.h to pixel.h).
  *
  * One invocation per pixel. The colour goes to an rgba8 image (the
  * editor draws it without a read-back; texel row 0 is the image's top row);

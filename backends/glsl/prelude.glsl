@@ -1,6 +1,6 @@
 /* prelude.glsl -- the GLSL 4.30 spelling of the shared tracer core's types and helpers.
  *
- * The tracer core (backends/shared/core.h to journey.h) is written in the common subset of GLSL
+ * The tracer core (backends/shared/options.h to pixel.h) is written in the common subset of GLSL
  * and OpenCL C; everything that is spelt differently goes through the macros
  * below. backends/shared/prelude_cl.h is the OpenCL C twin of this file: keep
  * the two in step (same names, same meaning).

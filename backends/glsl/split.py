@@ -1,4 +1,4 @@
-"""Camera rays in two dispatches on llvmpipe (``SPLIT_PASS`` in backends/shared/core.h).
+"""Camera rays in two dispatches on llvmpipe (``SPLIT_PASS`` in backends/shared/options.h).
 
 llvmpipe runs every branch of a shader masked for all the lanes of a SIMD vector, and a loop's body at least
 once with none of them active, so every pixel of a frame with portals paid for a pass of the event loop. Where

@@ -1,5 +1,5 @@
 /* trace.cl -- the OpenCL entry point (after defines, prelude_cl.h, layout.h, bindings_cl.h and the
- * tracer files, core.h to pixel.h).
+ * tracer files, options.h to pixel.h).
  *
  * One work-item per pixel, row 0 = the image's top row. The scene tables come
  * in the order of engine.layout.TABLES, then the camera row and the view tiles, then one buffer

@@ -3,7 +3,7 @@
 The files here are written once in the common subset of GLSL 4.30 and
 OpenCL C 1.2. A backend assembles a program as::
 
-    defines + its language prelude + layout.h + its bindings + core.h + its main
+    defines + its language prelude + layout.h + its bindings + the tracer files + its main
 
 where the prelude maps the core's types and helpers to the language
 (``backends/glsl/prelude.glsl``, ``prelude_cl.h`` here), ``layout.h`` declares the
@@ -11,8 +11,8 @@ packed records (written from ``engine.layout``'s declarations, ``layout_h.py``, 
 stored) and the bindings say
 how the packed tables are reached (GLSL: storage-buffer arrays, or RGBA32UI
 images on llvmpipe, ``backends/glsl/bindings.glsl``; OpenCL: a struct of
-``__global`` pointers, ``bindings_cl.h``). See ``core.h`` for the
-macros a prelude must provide.
+``__global`` pointers, ``bindings_cl.h``); the tracer files are :data:`TRACER_FILES`, ``options.h``
+(the compile-time options) to ``pixel.h``. See ``core.h`` for the macros a prelude must provide.
 """
 
 from __future__ import annotations
@@ -39,9 +39,10 @@ from .frame_tiles import view_tile_defines as view_tile_defines
 from .layout_h import layout_h
 
 #: The tracer core's files, in the order a backend concatenates them after its prelude, ``layout.h``
-#: and its bindings: each builds on those before it (core.h's records and helpers first, the
+#: and its bindings: each builds on those before it (options.h's defines, then core.h's records and helpers, the
 #: kernels' entry point ``trace_pixel`` in pixel.h last; shade.h after journey.h, whose shadow rays it sends).
 TRACER_FILES: tuple[str, ...] = (
+    "options.h",
     "core.h",
     "triangle.h",
     "bvh_binary.h",
@@ -327,7 +328,7 @@ class UploadedScene:
         return {"USE_TLAS": int(self._counts.get("instances", 0) != 1)}
 
     def _frame_space_defines(self, features: Features, row: np.ndarray, precision: str) -> dict[str, int]:
-        """Box code a frame provably never runs, compiled out (CAMERA_BOX_ENTRY, FACE_NEXT_ONLY in core.h): llvmpipe
+        """Box code a frame provably never runs, compiled out (CAMERA_BOX_ENTRY, FACE_NEXT_ONLY in options.h): llvmpipe
         runs every branch masked for all its lanes, and PoCL folds the first leg's box state (none) into constants
         where the camera's transition is gone. ``row``: the frame's camera row (pack_camera).
 

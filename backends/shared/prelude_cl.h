@@ -1,10 +1,10 @@
 /* prelude_cl.h -- the OpenCL C 1.2 spelling of the shared tracer core's types and helpers.
  *
  * Twin of backends/glsl/prelude.glsl: same names, same meaning. Include it
- * first, then layout.h, bindings_cl.h, the tracer files (core.h ... journey.h) and the kernel:
+ * first, then layout.h, bindings_cl.h, the tracer files (options.h ... pixel.h) and the kernel:
  *
  *     defines (REAL_IS_DOUBLE, HAS_*, MAX_EVENTS, ...) + prelude_cl.h + layout.h
- *     + bindings_cl.h + core.h + ... + pixel.h + the kernel that calls trace_pixel()
+ *     + bindings_cl.h + options.h + core.h + ... + pixel.h + the kernel that calls trace_pixel()
  *
  * Defines read here: REAL_IS_DOUBLE (trace in double; needs cl_khr_fp64),
  * EDGE_FALLBACK_FP64 and WORLD_FP64 (double helpers in a float tracer; set

@@ -1,5 +1,5 @@
 """GLSL on llvmpipe traces a frame with portals or boxes in two dispatches where its camera rays' first legs
-take the instances' lists (``SPLIT_PASS`` in core.h): the first finishes the rays their first leg ends and
+take the instances' lists (``SPLIT_PASS`` in options.h): the first finishes the rays their first leg ends and
 queues the others, the second goes on with those. The frames are one dispatch's to the bit, every AOV, from
 random cameras, with tiles too full to list (their rays go on from the start); a frame that queues most of its
 pixels (a door filling the view) makes the next ones take one dispatch until the camera has been away from
