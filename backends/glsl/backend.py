@@ -25,6 +25,7 @@ import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
+from backends.glsl.context import create_context, is_software, probe_context
 from backends.glsl.split import QUEUE_BINDING, SplitDispatch
 from backends.glsl.tables import (
     CAMERA_BINDING,
@@ -43,12 +44,6 @@ from engine.records import Precision
 if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
     import moderngl
 
-#: What to install when no OpenGL 4.3 context can be made (Debian names).
-INSTALL_HINT = (
-    "install Mesa's EGL and OpenGL drivers (apt-get install libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri) "
-    "and moderngl (pip install 'aberrant[glsl]')"
-)
-
 #: Storage-buffer bindings of the AOV outputs, after the scene tables' and the camera's.
 OUTPUT_BINDINGS: dict[str, int] = {
     "depth": CAMERA_BINDING + 1,
@@ -63,9 +58,6 @@ _OUTPUT_DTYPES: dict[str, np.dtype] = {
     "instance": np.dtype(np.int32),
     "events": np.dtype(np.uint32),
 }
-#: CPU renderers: storage-buffer loads slow enough to keep the tables in images instead.
-_SOFTWARE_RENDERERS = ("llvmpipe", "softpipe")
-
 #: Pixels per run of 8 consecutive invocations (one SIMD vector on llvmpipe): a 4x2 block instead of a row
 #: of 8 diverges less in traversal. Interleaved A/B, 800x800 f32, CPU time per frame: mesh-10k 173 -> 169 ms,
 #: mesh-200k 222 -> 216 ms, ten-boxes 106 -> 104 ms (2x4 and Morton order: smaller gains). Same frames.
@@ -93,13 +85,6 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     *(("backends.shared", name) for name in shared.TRACER_FILES),
     ("backends.glsl", "main.comp"),
 )
-
-
-def _create_context() -> moderngl.Context:
-    import moderngl
-
-    # moderngl's stub types each of **settings as a dict; they are plain values (backend="egl").
-    return moderngl.create_standalone_context(backend="egl", require=430)  # type: ignore[arg-type]
 
 
 #: BVH widths the shader traverses: 8-wide nodes are read as float8, which GLSL does not have.
@@ -141,7 +126,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         self._owns_context = context is None
         if context is None:
             try:
-                context = _create_context()
+                context = create_context()
             except Exception as e:  # the probe passed, yet no context now: say so, do not crash the caller
                 raise BackendUnavailable(f"glsl backend cannot create an OpenGL 4.3 context: {e}") from e
         self._ctx: moderngl.Context | None = context
@@ -149,10 +134,10 @@ class GlslBackend(shared.UploadedScene, Backend):
         self.lane_block: tuple[int, int] = lane_block(self.workgroup)
         if tables not in ("auto", "ssbo", "image"):
             raise AberrantError(f"glsl backend: tables must be 'auto', 'ssbo' or 'image', got {tables!r}")
-        renderer = str(self._ctx.info.get("GL_RENDERER", "")).lower()
+        renderer = str(self._ctx.info.get("GL_RENDERER", ""))
         #: A CPU rasteriser (llvmpipe): storage-buffer loads go one SIMD lane at a time, and the
         #: compiler flattens small branches, so rare-case code costs every lane.
-        self.software = any(name in renderer for name in _SOFTWARE_RENDERERS)
+        self.software = is_software(renderer)
         if tables == "auto":
             tables = "image" if self.software else "ssbo"
         #: Where the tables live on the device: ``"ssbo"`` or ``"image"``.
@@ -187,25 +172,8 @@ class GlslBackend(shared.UploadedScene, Backend):
     def probe(cls) -> str | None:
         """``None`` when a headless OpenGL 4.3 context with compute shaders can be made (cached per process)."""
         if cls._probe_cache is None:
-            cls._probe_cache = (cls._probe_uncached(),)
+            cls._probe_cache = (probe_context(),)
         return cls._probe_cache[0]
-
-    @staticmethod
-    def _probe_uncached() -> str | None:
-        try:
-            import moderngl  # noqa: F401
-        except ImportError as e:
-            return f"moderngl is not installed ({e}); pip install 'aberrant[glsl]'"
-        try:
-            ctx = _create_context()
-        except Exception as e:  # glcontext raises plain Exceptions naming the failed EGL call
-            return f"no headless OpenGL 4.3 context through EGL ({type(e).__name__}: {e}); {INSTALL_HINT}"
-        try:
-            if ctx.version_code < 430:
-                return f"OpenGL {ctx.version_code / 100:.1f} is too old (compute shaders need 4.3); {INSTALL_HINT}"
-        finally:
-            ctx.release()
-        return None
 
     def info(self) -> dict[str, str]:
         """Renderer, version, vendor and compute limits (``aberrant backends``)."""
