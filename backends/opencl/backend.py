@@ -18,8 +18,6 @@ as float64) where the device has ``cl_khr_fp64``.
 from __future__ import annotations
 
 import hashlib
-import re
-import sys
 import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, ClassVar
@@ -29,13 +27,13 @@ import numpy as np
 from backends import shared
 from backends.base import AOV_DTYPES, AOVS, Backend, Frame
 from backends.opencl import cache
+from backends.opencl.build import BUILD_OPTIONS, build_program
 from backends.opencl.cache import configure_caches
 from backends.opencl.devices import (
     FP64_EXTENSION,
     INSTALL_PYOPENCL,
     device_has_fp64,
     device_kind,
-    first_line,
     import_cl,
     pocl_version,
     select_device,
@@ -59,16 +57,6 @@ _SOURCES: tuple[tuple[str, str], ...] = (
 )
 #: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.
 KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", *(f"{name}_out" for name in AOVS))
-#: Build options of every variant. ``-cl-denorms-are-zero`` lets the driver flush float denormals
-#: (GPUs mostly do anyway, so the core never relies on them): on PoCL 3.0 a torus of 10,000
-#: triangles at f32 took 30 % less time per frame with it, with bit-identical parity results.
-#: The gain is not from subnormal data: with the camera off every splitting plane, the packed
-#: bounds' subnormals (0 rounded outward) replaced by the smallest normal float, and the core's
-#: one subnormal product (the box widening of exits near 0) removed, PoCL 3.1 still spends about
-#: 45 % more CPU time on the 10k torus without it (161 vs 238 ms a 800x800 frame): its code
-#: generation, not the scene's numbers, depends on the flag.
-#: No ``-cl-fast-relaxed-math`` or ``-cl-mad-enable``: the core needs inf/NaN semantics and unfused
-#: products for its watertight edge functions.
 #: The BVH width each precision traverses fastest (see ``OpenClBackend.bvh_width``). The default
 #: ``BvhParams`` build the 8-wide trees too: CPU time per 800x800 frame (mesh-10k / mesh-200k /
 #: ten-boxes, PoCL 3.1) was within 1 % for traversal cost 0.3, 0.5 or 2.0, and worse for leaves of
@@ -76,7 +64,6 @@ KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", *(f"{nam
 BVH_WIDTH_BY_PRECISION: dict[Precision, int] = {"f32": 8, "f64": 4}
 #: The instance tree's width (OpenClBackend.tlas_width) by precision.
 TLAS_WIDTH_BY_PRECISION: dict[Precision, int] = {"f32": 8, "f64": 4}
-BUILD_OPTIONS: tuple[str, ...] = ("-cl-denorms-are-zero",)
 #: Work-group size on a CPU device (PoCL). Measured on PoCL 3.0, 800x800 frames of three scenes:
 #: None, 8x8, 16x16, 32x8, 32x32 and 64x4 are all within 3 % of each other (the traversal loops keep
 #: PoCL from vectorising across work-items, so a group is a plain loop over pixels); 16x16 is
@@ -84,9 +71,6 @@ BUILD_OPTIONS: tuple[str, ...] = ("-cl-denorms-are-zero",)
 CPU_LOCAL_SIZE: tuple[int, int] = (16, 16)
 #: Work-group size on a GPU: 64 work-items in an 8x8 tile (coherent rays, any warp size).
 GPU_LOCAL_SIZE: tuple[int, int] = (8, 8)
-#: A compiler diagnostic on the source in a build log (``error: /path/file.cl:LINE:COL: ...``): the source's own
-#: error, which no cache entry caused.
-SOURCE_ERROR = re.compile(r"^(?:fatal )?error: \S+\.cl:\d+:\d+: ", re.MULTILINE)
 
 
 class OpenClBackend(shared.UploadedScene, Backend):
@@ -311,33 +295,12 @@ class OpenClBackend(shared.UploadedScene, Backend):
         """This backend's kernel object of a program built once per context (see :mod:`backends.opencl.cache`)."""
         context = self._context()
         key = (hashlib.sha256(source.encode()).hexdigest(), tuple(self.build_options))
-        program = cache.kept_program(context, key, lambda: self._build_program(source))
+        program = cache.kept_program(
+            context, key, lambda: build_program(context, source, self.build_options, self._cache_dir)
+        )
         kernel = cache.take_kernel(context, key, lambda: self._cl.Kernel(program, "trace"))
         self._program_keys[id(kernel)] = key
         return kernel
-
-    def _build_program(self, source: str) -> cl.Program:
-        """Build one program; a failure that came from a cached entry removes that entry and tries once more."""
-        cl = self._cl
-        for attempt in (1, 2):
-            started = time.time() - 1.0  # file times are coarse on some file systems
-            try:
-                return cl.Program(self._context(), source).build(
-                    options=list(self.build_options), cache_dir=self._cache_dir
-                )
-            except cl.Error as e:  # its message carries the build log
-                # An error on the source leaves the cache alone: the entries touched meanwhile are other
-                # processes' (parallel test workers, a cluster's workers sharing the cache), still in use.
-                retry = attempt == 1 and SOURCE_ERROR.search(str(e)) is None
-                removed = cache.forget_touched(started) if retry else []
-                if not removed:
-                    raise BackendUnavailable(f"opencl backend: the kernel does not build: {e}") from e
-                print(
-                    f"aberrant: warning: the OpenCL kernel did not build from its cache entry {removed[0]} "
-                    f"({first_line(str(e))}); removed it, rebuilding",
-                    file=sys.stderr,
-                )
-        raise AssertionError("unreachable")  # pragma: no cover
 
     def _bind(self, kernel: cl.Kernel, args: list[cl.Buffer | None]) -> None:
         """Set the kernel arguments that differ from what it holds (each set costs a driver call)."""
