@@ -2,10 +2,10 @@
 
 Every table the tracers read is a NumPy structured dtype whose bytes go
 unchanged into a std430 shader storage buffer and an OpenCL buffer. Each record
-is declared here once, as a :class:`Record` of 4-vector fields (``real4`` /
+is declared here once, as a :class:`engine.records.Record` of 4-vector fields (``real4`` /
 ``float4`` / ``int4``; 8-vectors for the 8-wide BVH, OpenCL only), the subset
 on which std430 and OpenCL C agree. Both sides come from that declaration: the
-host's dtype (:meth:`Record.dtype`) and the kernels' struct, which
+host's dtype (:meth:`engine.records.Record.dtype`) and the kernels' struct, which
 ``backends/shared/layout_h.py`` writes into the kernel source as ``layout.h``,
 so host and kernel cannot drift apart. Tests assert offsets and sizes against
 the std430 rules, and that the written structs read the dtypes' bytes.
@@ -27,7 +27,7 @@ Two families exist:
   is padded to the alignment of its widest vector (16 bytes for f32, 32 bytes
   for f64), as std430 and OpenCL C both do.
 
-A new record is one :class:`Record` added to :data:`RECORDS` (its kernel struct
+A new record is one :class:`engine.records.Record` added to :data:`RECORDS` (its kernel struct
 follows), plus the table's row in :data:`TABLES` and :func:`table_dtype`.
 """
 

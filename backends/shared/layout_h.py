@@ -1,6 +1,6 @@
 """``layout.h``, the kernels' packed records, written from ``engine.layout``'s declarations.
 
-Each record is declared once, on the host (:class:`engine.layout.Record`); its dtype and its kernel
+Each record is declared once, on the host (:class:`engine.records.Record`); its dtype and its kernel
 struct both come from that declaration, so the bytes the packer writes are the bytes the kernels
 read by construction. The text is the same for both languages and precisions (``real4`` is the
 prelude's); GLSL's RGBA32UI image readers sit behind ``TABLES_IN_IMAGES``, which only GLSL defines.
