@@ -9,20 +9,10 @@ import json
 from typing import Any
 
 import pytest
-from test_fuzz_scene_files import TELLO, expect_error, run_cli, tello_required
+from test_fuzz_scene_files import TELLO, doc_with, expect_error, run_cli, tello_required
 
 from engine.scene import Scene
 from engine.scene_file import SceneFileError, load_scene, save_scene
-
-
-def doc_with(**extra: object) -> dict[str, Any]:
-    doc: dict[str, Any] = {
-        "format": "aberrant-scene",
-        "version": 1,
-        "entities": [{"name": "floor", "mesh": {"asset": "plane"}}],
-    }
-    doc.update(extra)
-    return doc
 
 
 def test_integer_literal_over_4300_digits_is_malformed_json(tmp_path):

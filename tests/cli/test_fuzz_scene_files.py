@@ -225,6 +225,17 @@ def write_document(folder: Path, doc: object, name: str = "scene.json") -> Path:
     return path
 
 
+def doc_with(**extra: object) -> dict[str, Any]:
+    """A minimal valid document (one floor), with ``extra`` top-level keys set."""
+    doc: dict[str, Any] = {
+        "format": "aberrant-scene",
+        "version": 1,
+        "entities": [{"name": "floor", "mesh": {"asset": "plane"}}],
+    }
+    doc.update(extra)
+    return doc
+
+
 # --- valid documents round-trip byte-identically ---------------------------------------------
 
 
