@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from backends.base import Backend, backend_class, probe
+from engine.bvh_cache import clear_memory_cache
 from engine.records import Precision
 from engine.scene import Scene
 
@@ -41,6 +42,14 @@ def scenes() -> Iterator[list[Scene]]:
     yield made
     for scene in made:
         scene.close()
+
+
+@pytest.fixture
+def fresh_memory() -> Iterator[None]:
+    """The in-memory BVH cache empty before and after the test."""
+    clear_memory_cache()
+    yield
+    clear_memory_cache()
 
 
 @pytest.fixture(scope="session")
