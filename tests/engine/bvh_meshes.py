@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from hypothesis import strategies as st
 
 from engine.bvh import Bvh, BvhParams
 
@@ -72,3 +73,9 @@ def same_tree(a: Bvh, b: Bvh) -> None:
 def refuse_to_build(*args: object, **kwargs: object) -> None:
     """A stand-in for build_bvh where a cached tree must be used."""
     raise AssertionError("build_bvh called although a cached tree exists")
+
+
+def integer_soups(max_size: int) -> st.SearchStrategy[list[list[list[int]]]]:
+    """Up to ``max_size`` triangles with small integer corners: many shared planes, edges and duplicates."""
+    corner = st.lists(st.integers(-3, 3), min_size=3, max_size=3)
+    return st.lists(st.lists(corner, min_size=3, max_size=3), min_size=1, max_size=max_size)

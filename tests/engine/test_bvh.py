@@ -11,6 +11,7 @@ from bvh_meshes import (
     degenerate,
     from_corners,
     icosphere,
+    integer_soups,
     refuse_to_build,
     same_tree,
     soup,
@@ -76,11 +77,7 @@ def test_structural_invariants(name, params):
 
 @settings(max_examples=40, deadline=None)
 @given(
-    corners=st.lists(
-        st.lists(st.lists(st.integers(-3, 3), min_size=3, max_size=3), min_size=3, max_size=3),
-        min_size=1,
-        max_size=40,
-    ),
+    corners=integer_soups(40),
     leaf=st.integers(1, 5),
     bins=st.integers(2, 8),
 )

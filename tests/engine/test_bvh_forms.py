@@ -13,6 +13,7 @@ from bvh_meshes import (
     PARAMS,
     PLAIN,
     from_corners,
+    integer_soups,
     refuse_to_build,
     same_tree,
     soup,
@@ -103,11 +104,7 @@ def test_collapse_to_wide(name, params, width):
 
 @settings(max_examples=30, deadline=None)
 @given(
-    corners=st.lists(
-        st.lists(st.lists(st.integers(-3, 3), min_size=3, max_size=3), min_size=3, max_size=3),
-        min_size=1,
-        max_size=60,
-    ),
+    corners=integer_soups(60),
     leaf=st.integers(1, 5),
     width=st.sampled_from(WIDE),
 )
