@@ -47,9 +47,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CONNECT_TIMEOUT_S",
-    "FrameJob",
     "connect",
-    "frame_job",
     "local_cluster",
     "render_distributed",
     "work_folder",

@@ -27,7 +27,7 @@ from engine.bvh import BvhParams
 from engine.camera_view import scene_camera
 from engine.maths import normalize
 from engine.packed import Features, PackedScene, TableUpdate
-from engine.packing_geometry import pack_geometry
+from engine.packing_geometry import PackedGeometry, pack_geometry
 from engine.packing_lights import light_entities, pack_lights, shadowing
 from engine.packing_space import SpaceTables
 from engine.records import Precision
@@ -96,14 +96,12 @@ class ScenePacker:
         self.bvh_params = bvh_params or BvhParams()
         #: The most MiB of texels the scene's textures may take (16 bytes a texel); past it, a clear error.
         self.texture_budget_mib = texture_budget_mib
-        self._normal_offset: dict[tuple[str, float], int] = {}
-        self._texture_first: dict[str, int] = {}
         self.packed: PackedScene | None = None
         self._cursor = -1
         self._scene_world: str | None = None
         self._instance_row: dict[int, int] = {}
-        self._asset_roots: dict[str, int] = {}
-        self._asset_flags: dict[str, int] = {}
+        #: The asset tables' offsets (each asset's tree root and flags, normals, texels) of the last full pack.
+        self._geometry = PackedGeometry({}, {}, {}, {}, {})
         self.tlas_margin = tlas_margin
         #: The top-level tree over the instance rows (``tlas_nodes``), kept in step with them.
         self.tlas = AabbTree.build(np.zeros((0, 3)), np.zeros((0, 3)), tlas_margin)
@@ -167,7 +165,7 @@ class ScenePacker:
                 updates.append(TableUpdate("settings"))
             elif change.kind in ("transform", "mesh") and change.entity in self._instance_row:
                 mesh = scene.get(change.entity, Mesh)
-                if scene.asset(mesh.asset).content_hash not in self._asset_roots or (
+                if scene.asset(mesh.asset).content_hash not in self._geometry.roots or (
                     change.kind == "mesh" and not self._has_shading_data(scene, mesh)
                 ):
                     return self._resync(scene, camera_position)
@@ -209,10 +207,10 @@ class ScenePacker:
     def _has_shading_data(self, scene: Scene, mesh: Mesh) -> bool:
         """Whether the packed normals and texels already hold what ``mesh`` shades with."""
         asset = scene.asset(mesh.asset)
-        if mesh.smooth and (asset.content_hash, mesh.crease_deg) not in self._normal_offset:
+        if mesh.smooth and (asset.content_hash, mesh.crease_deg) not in self._geometry.normal_offset:
             return False
         texture = scene.texture(mesh) if asset.uvs is not None else None
-        return texture is None or texture.content_hash in self._texture_first
+        return texture is None or texture.content_hash in self._geometry.texture_first
 
     def _resync(self, scene: Scene, camera_position: np.ndarray) -> list[TableUpdate]:
         self.packed = None
@@ -227,12 +225,11 @@ class ScenePacker:
         self._instance_row = {entity: row for row, (entity, _) in enumerate(meshes)}
         geometry = pack_geometry(scene, meshes, self.bvh_params, self.bvh_width, self.bvh_compact,
                                  self.texture_budget_mib)  # fmt: skip
-        self._asset_roots, self._asset_flags = geometry.roots, geometry.flags
-        self._normal_offset, self._texture_first = geometry.normal_offset, geometry.texture_first
+        self._geometry = geometry
         tables = geometry.tables
         counts = {name: len(t) for name, t in tables.items()}
         tables = {name: _at_least_one_row(t) for name, t in tables.items()}
-        features = Features(textures=bool(self._texture_first), smooth=bool(self._normal_offset))
+        features = Features(textures=bool(self._geometry.texture_first), smooth=bool(self._geometry.normal_offset))
         self.packed = PackedScene(
             self.precision, origin, tables, counts, features, np.array([e for e, _ in meshes], dtype=np.int32),
             versions={name: old_versions.get(name, 0) + 1 for name in layout.TABLES},
@@ -310,10 +307,10 @@ class ScenePacker:
             table["bounds_min"][row, :3] = bmin
             table["bounds_max"][row, :3] = bmax
             table["meta"][row] = (
-                self._asset_roots[asset.content_hash],
+                self._geometry.roots[asset.content_hash],
                 row,
                 entity,
-                self._asset_flags[asset.content_hash] | (layout.INSTANCE_FLAG_SMOOTH if mesh.smooth else 0),
+                self._geometry.flags[asset.content_hash] | (layout.INSTANCE_FLAG_SMOOTH if mesh.smooth else 0),
             )
 
     def _instance_bounds(self, rows: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -358,9 +355,9 @@ class ScenePacker:
         texture = scene.texture(mesh) if asset.uvs is not None else None
         first, height, width = 0, 0, 0
         if texture is not None:
-            first = self._texture_first[texture.content_hash]
+            first = self._geometry.texture_first[texture.content_hash]
             height, width = texture.pixels.shape[:2]
-        offset = self._normal_offset.get((asset.content_hash, mesh.crease_deg), 0) if mesh.smooth else 0
+        offset = self._geometry.normal_offset.get((asset.content_hash, mesh.crease_deg), 0) if mesh.smooth else 0
         table["texture"][row] = (first, width, height, offset)
 
 
