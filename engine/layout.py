@@ -218,8 +218,9 @@ ABERRATION = Record(
 
 #: A portal quad: ``world_to_local`` rows map camera-relative world points into the quad's space
 #: ([-1, 1]^2 at z = 0); ``transfer`` rows are ``X = M_target M_self^-1`` in camera-relative
-#: coordinates (its 3x3 part is the direction map L); ``meta = (target_row, entity, 0, 0)``,
-#: target_row -1 when unlinked.
+#: coordinates (its 3x3 part is the direction map L); ``meta = (target_row, entity, gap, 0)``,
+#: target_row -1 when unlinked, gap the float32 bits of a lower bound on the world distance from the quad
+#: to every other quad (a leg leaving it walks the portal tree from there on: ``LEFT_PORTAL_GAP``).
 PORTAL = Record(
     "Portal",
     (

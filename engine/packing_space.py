@@ -6,7 +6,9 @@ dynamic AABB trees (:class:`engine.tlas.AabbTree`), one over the portals' quads,
 after the other in ``space_nodes`` (roots in the settings' ``space_roots``), then each tree's 4-wide form
 (:mod:`engine.space_wide`, which OpenCL's ray walks take). A moved portal or box re-packs its own row (and, for
 a portal, the rows of the portals that lead into it) and refits its leaf's path, in both forms, only when it
-left its fat box; the tree is rebuilt, and every row re-packed, only when the set changes.
+left its fat box; the tree is rebuilt, and every row re-packed, only when the set changes. Boxes keep their
+clearances and portals their gaps to each other (:class:`engine.clearances.BoxClearances`, a quad as a thin
+box) in step with the moves.
 """
 
 from __future__ import annotations
@@ -29,6 +31,11 @@ from engine.tlas import FAT_MARGIN, SPACE_SLACK, AabbTree
 #: Corners of a portal's quad ([-1, 1]^2 at z = 0) and of an aberration's unit box, in their local frames.
 QUAD_CORNERS = np.array([[x, y, 0.0] for x in (-1.0, 1.0) for y in (-1.0, 1.0)])
 BOX_CORNERS = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+#: Half the thickness a portal quad gets as a solid for its gap to the others, in its local units.
+QUAD_THICKNESS = 1e-6
+#: A portal's world-to-local rows scaled to the unit box's [-0.5, 0.5] (the quad's [-1, 1], its plane
+#: +-QUAD_THICKNESS).
+QUAD_AS_BOX = np.array([0.5, 0.5, 0.5 / QUAD_THICKNESS])[:, None]
 
 
 def corner_bounds(forward: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -81,6 +88,8 @@ class SpaceTables:
         self._linked = 0
         #: The boxes' clearances to the instances and to each other (rotation rows' w).
         self.clearances = BoxClearances()
+        #: Each portal quad's gap to every other one (meta.z), kept as the boxes' gaps are.
+        self.portal_gaps = BoxClearances()
 
     # --- what the packer asks ----------------------------------------------------------------
 
@@ -119,6 +128,7 @@ class SpaceTables:
         """The packed origin moved by ``delta``: every row again, the trees shifted with them."""
         lo, hi = self._pack_portal_rows(scene, packed, list(range(len(self.portals))))
         self.portal_tree.translate(delta, lo, hi)
+        self._store_portal_gaps(packed, self.portal_gaps.full(*self._portal_solids(packed)))
         lo, hi = self._pack_box_rows(scene, packed, list(range(len(self.boxes))))
         self.box_tree.translate(delta, lo, hi)
         self._store_clearances(packed, self.clearances.full(self._box_matrices(packed), *instances))
@@ -146,6 +156,8 @@ class SpaceTables:
             lo, hi = self._pack_portal_rows(scene, packed, rows)
             updates += [TableUpdate("portals", range(r, r + 1)) for r in rows]
             updates += self._refit(packed, self.portal_tree, rows, lo, hi, 0)
+            moved = sorted(self.portals.row[e] for e in portals if e in self.portals.row)
+            updates += self._store_portal_gaps(packed, self.portal_gaps.moved(*self._portal_solids(packed), moved, []))
         box_rows = sorted(self.boxes.row[e] for e in boxes if e in self.boxes.row)
         if box_rows:
             lo, hi = self._pack_box_rows(scene, packed, box_rows)
@@ -167,6 +179,30 @@ class SpaceTables:
         self._linked = 0
         lo, hi = self._pack_portal_rows(scene, packed, list(range(n)))
         self.portal_tree = AabbTree.build(lo, hi, self.margin, SPACE_SLACK)
+        self.portal_gaps = BoxClearances()
+        self._store_portal_gaps(packed, self.portal_gaps.full(*self._portal_solids(packed)))
+
+    def _portal_solids(self, packed: PackedScene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The portal quads as the boxes' clearances take solids: each a unit box's world-to-local map, its
+        quad's plane thickened by :data:`QUAD_THICKNESS` local units (a thicker solid only lowers the gap),
+        and no instances."""
+        m = packed.tables["portals"]["world_to_local"][: len(self.portals)].astype(np.float64)
+        return m * QUAD_AS_BOX, np.zeros((0, 3)), np.zeros((0, 3))
+
+    def _store_portal_gaps(self, packed: PackedScene, rows: list[int]) -> list[TableUpdate]:
+        """Write the gaps of portal ``rows`` into their meta.z as float32 bits, rounded down; the rows whose
+        bytes changed."""
+        meta = packed.tables["portals"]["meta"]
+        updates = []
+        for row in rows:
+            gap = np.float32(self.portal_gaps.box[row])
+            if float(gap) > self.portal_gaps.box[row]:
+                gap = np.nextafter(gap, np.float32(0.0))
+            bits = int(gap.view(np.int32))
+            if meta[row, 2] != bits:
+                meta[row, 2] = bits
+                updates.append(TableUpdate("portals", range(row, row + 1)))
+        return updates
 
     def _target_row(self, scene: Scene, portal: Portal) -> int:
         return -1 if portal.target is None else self.portals.row[scene.entity(portal.target)]
@@ -199,7 +235,7 @@ class SpaceTables:
                 self._sources.setdefault(target, set()).add(row)
                 self._linked += 1
             self._targets[row] = target
-            table["meta"][row] = (target, entity, 0, 0)
+            table["meta"][row] = (target, entity, table["meta"][row, 2], 0)  # z: the gap, kept
         return corner_bounds(forward, QUAD_CORNERS)
 
     # --- boxes ------------------------------------------------------------------------------------

@@ -121,7 +121,7 @@ FORCE_INLINE LegEvents leg_events(SCENE_DECL Ray ray TILED_DECL)
     } else
 #endif
     {
-        ev.portal = nearest_portal(SCENE_PASS ray.o, ray.r, ev.t_min, skip_portal);
+        ev.portal = portal_from(SCENE_PASS ray.o, ray.r, ray.o_len, ray.r_len, ray.t_from, ev.t_min, skip_portal);
     }
     ev.t_cut = ev.portal.t;
 #endif

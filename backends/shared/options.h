@@ -46,6 +46,8 @@
  *                      LEFT_BOX_GAP 1: a leg leaving a box's face walks the box tree only from that box's
  *                      gap on (boxes.h, box_face_from; OpenCL's default, 0 on GLSL, where llvmpipe runs
  *                      the left box's faces for every lane)
+ *                      LEFT_PORTAL_GAP 1: a leg that comes out of a portal walks the portal tree only from
+ *                      that quad's gap (portal rows' meta.z) on (portals.h, portal_from; both backends)
  *   CAMERA_BOX_ENTRY   0: the host's camera row says no primary ray starts in a box (size.z = -1), so the
  *                      transition at the camera compiles out; FACE_NEXT_ONLY 1: the host proved FACE_NEXT_BOX's
  *                      gap test true for every face event of the frame, so the containing_box loop after a face
@@ -160,6 +162,9 @@
 #else
 #define LEFT_BOX_GAP 0
 #endif
+#endif
+#ifndef LEFT_PORTAL_GAP
+#define LEFT_PORTAL_GAP 1
 #endif
 #ifndef SPACE_WALK
 #define SPACE_WALK 1

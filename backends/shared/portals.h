@@ -25,6 +25,18 @@ FORCE_INLINE Event portal_quad(SCENE_DECL Event best, int p, real3 o, real3 r, r
     return best;
 }
 
+#if PORTAL_TREE
+/* The quads after best that the ray passes with t_quad < t, of the leaves it enters within (t_min, best.t],
+ * t_min >= t_quad where no other quad can be passed nearer (portal_from). */
+FORCE_INLINE Event tree_portals(SCENE_DECL Event best, real3 o, real3 r, real t_min, real t_quad, int skip)
+{
+    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.x, SETTINGS.space_roots.z)
+    best = portal_quad(SCENE_PASS best, leaf, o, r, t_quad, skip);
+    SPACE_LEAVES_END
+    return best;
+}
+#endif
+
 /* The nearest linked portal quad the ray passes through with t_min < t (portals.nearest_portal_hits):
  * kind EVENT_PORTAL, t = REAL_MAX for none. The closed quad |x|, |y| <= 1 at z = 0, two-sided; a ray
  * parallel to its plane never hits; the portal being left (skip) and unlinked ones never count; ties
@@ -33,9 +45,7 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
 {
     Event best = no_event();
 #if PORTAL_TREE
-    SPACE_LEAVES_BEGIN(SETTINGS.space_roots.x, SETTINGS.space_roots.z)
-    best = portal_quad(SCENE_PASS best, leaf, o, r, t_min, skip);
-    SPACE_LEAVES_END
+    best = tree_portals(SCENE_PASS best, o, r, t_min, t_min, skip);
 #else
     int count = PORTAL_ROWS;
     for (int p = 0; p < count; ++p) {
@@ -43,6 +53,25 @@ FORCE_INLINE Event nearest_portal(SCENE_DECL real3 o, real3 r, real t_min, int s
     }
 #endif
     return best;
+}
+
+/* nearest_portal for a leg that starts (at t_from) on the quad of portal `left` (-1: none), the one it skips.
+ * LEFT_PORTAL_GAP: every other quad lies at least left's gap away (meta.z, from the host: a lower bound of
+ * the distance), so none is passed before t_from + gap / |r|, less twice the nudge for the rounding of the
+ * start point: the tree's walk starts there, and after a ray comes out of a portal it no longer descends to
+ * the leaves around the quad it left. */
+FORCE_INLINE Event portal_from(SCENE_DECL real3 o, real3 r, real o_len, real r_len, real t_from, real t_min, int left)
+{
+#if LEFT_PORTAL_GAP && PORTAL_TREE
+    real reach = t_min;
+    if (left >= 0) {
+        real nudge = NUDGE_RELATIVE * max(REAL(1.0f), o_len + t_from);
+        reach = max(t_min, t_from + TO_REAL(AS_FLOAT(PORTAL(left).meta.z)) / r_len - REAL(2.0f) * nudge);
+    }
+    return tree_portals(SCENE_PASS no_event(), o, r, reach, t_min, left);
+#else
+    return nearest_portal(SCENE_PASS o, r, t_min, left);
+#endif
 }
 
 #if VIEW_TILES && PORTAL_TREE
