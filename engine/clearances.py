@@ -36,6 +36,9 @@ def box_clearances(
 Pairs = Callable[[np.ndarray, np.ndarray], np.ndarray]
 #: The value of a box with no partner (no instances, no other box).
 _FAR = 1e30
+#: Up to this many box pairs a search among the boxes evaluates every pair at once, not the tree's branch and
+#: bound: one vector pass costs less than the tree's Python steps (a box moved among 1,024: 0.2 against 4 ms).
+BRUTE_PAIRS = 1 << 14
 #: Coordinates beyond this (or not finite) make every clearance they touch 0, as an overflowing pair would.
 _HUGE = 1e100
 
@@ -302,6 +305,11 @@ class BoxClearances:
         if not self._good_boxes.all():
             self._raw_box[:] = 0.0
             return
+        n = len(self._centre)
+        if len(rows) * n <= BRUTE_PAIRS:
+            self._take(np.repeat(rows, n), np.tile(np.arange(n), len(rows)), self._raw_box, self._partner_box,
+                       self._box_pairs)  # fmt: skip
+            return
         # The neighbours in the tree's leaf order first: near in space, and never the box itself.
         order, position = self._leaf_order()
         for step in (-1, 1):
@@ -328,6 +336,11 @@ class BoxClearances:
         from b to a moved box m is at least m's projection gap on m's own face normals, so the search
         descends the boxes' tree with m as the query, down to the nodes that could hold such a b."""
         assert self._boxes is not None
+        n = len(self._centre)
+        if len(moved) * n <= BRUTE_PAIRS:
+            b, m = np.tile(np.arange(n), len(moved)), np.repeat(moved, n)
+            wanted = ~np.isin(b, exclude)
+            return self._lower(b[wanted], m[wanted], self._raw_box, self._partner_box, self._box_pairs)
         largest = float(self._raw_box.max()) if len(self._raw_box) else 0.0
         nodes = self._boxes.nodes
         count, first = nodes["count"], nodes["first"].astype(np.int64)

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from scenes import crowded
 
 from components import Aberration, Transform
+from engine import clearances as clearances_module
 from engine.affine_batch import rotation_batch, trs_inverse_batch
 from engine.box_clearance import CLEARANCE_SLACK, box_solids, separation
 from engine.camera_view import CAMERA_BOX_PER_RAY, camera_box
@@ -64,21 +65,48 @@ def random_instances(rng: np.random.Generator, m: int, spread: float) -> tuple[n
     return lo, lo + rng.uniform(0.0, 2.0, (m, 3)) * (rng.random((m, 3)) > 0.1)
 
 
+class Pairs:
+    """BRUTE_PAIRS set for a block: 0 takes the trees' branch and bound for every search among boxes, a large
+    value every pair at once (below it, the moves' searches do by default)."""
+
+    def __init__(self, limit: int) -> None:
+        self.limit = limit
+
+    def __enter__(self) -> None:
+        self.saved, clearances_module.BRUTE_PAIRS = clearances_module.BRUTE_PAIRS, self.limit
+
+    def __exit__(self, *_: object) -> None:
+        clearances_module.BRUTE_PAIRS = self.saved
+
+
+SEARCHES = [pytest.param(0, id="trees"), pytest.param(1 << 20, id="every-pair")]
+
+
+@pytest.mark.parametrize("limit", SEARCHES)
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 60), st.integers(0, 40), st.floats(1.0, 30.0), st.integers(0, 2**32 - 1))
-def test_box_clearances_are_the_brute_forces(n, m, spread, seed):
+@given(n=st.integers(0, 60), m=st.integers(0, 40), spread=st.floats(1.0, 30.0), seed=st.integers(0, 2**32 - 1))
+def test_box_clearances_are_the_brute_forces(limit, n, m, spread, seed):
     rng = np.random.default_rng(seed)
     boxes, (lo, hi) = random_boxes(rng, n, spread), random_instances(rng, m, spread)
-    fast, truth = box_clearances(boxes, lo, hi), brute_clearances(boxes, lo, hi)
+    with Pairs(limit):
+        fast = box_clearances(boxes, lo, hi)
+    truth = brute_clearances(boxes, lo, hi)
     np.testing.assert_array_equal(fast[0], truth[0])
     np.testing.assert_array_equal(fast[1], truth[1])
 
 
+@pytest.mark.parametrize("limit", SEARCHES)
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.integers(2, 50), st.integers(1, 30), st.integers(0, 2**32 - 1))
-def test_clearances_after_moves_are_the_brute_forces(n, m, seed):
+@given(n=st.integers(2, 50), m=st.integers(1, 30), seed=st.integers(0, 2**32 - 1))
+def test_clearances_after_moves_are_the_brute_forces(limit, n, m, seed):
     """Boxes and instances moved a few at a time: the values searched again where a partner moved, lowered
-    where a mover came nearer, equal the brute force's over the moved scene every time."""
+    where a mover came nearer, equal the brute force's over the moved scene every time, through the trees
+    and through every pair."""
+    with Pairs(limit):
+        moved_clearances_match(n, m, seed)
+
+
+def moved_clearances_match(n: int, m: int, seed: int) -> None:
     rng = np.random.default_rng(seed)
     boxes, (lo, hi) = random_boxes(rng, n, 6.0), random_instances(rng, m, 6.0)
     clearances = BoxClearances()
