@@ -2,7 +2,9 @@
 
 Run it only when a change is meant to alter what a demo looks like, and say why in the commit:
 ``python scripts/record_frame_hashes.py [DEMO ...]`` (all demos when none are named). Every
-backend variant that can start on this machine is recorded; the devices are stored with them.
+backend variant that can start on this machine is recorded; the devices are stored with them. A fast
+backend's device other than the main record's goes under ``other_devices`` (``--main`` makes it the main
+one), so each device keeps its own bits.
 """
 
 from __future__ import annotations
@@ -22,12 +24,18 @@ from systems.app import render_once  # noqa: E402
 
 
 def main(argv: list[str]) -> int:
-    demos = argv or demo_names()
+    main_device = "--main" in argv
+    demos = [a for a in argv if a != "--main"] or demo_names()
     record = json.loads(RECORD.read_text())
     for backend_name, precision in VARIANTS:
         backend = backend_class(backend_name)(precision=None if backend_name == "reference" else precision)
+        hashes = record["hashes"]
         if backend_name != "reference":
-            record["devices"][backend_name] = device_of(backend)
+            device = device_of(backend)
+            if main_device or record["devices"].get(backend_name) in (None, device):
+                record["devices"][backend_name] = device
+            else:
+                hashes = record.setdefault("other_devices", {}).setdefault(backend_name, {}).setdefault(device, {})
         for demo in demos:
             scene = build_demo(demo)
             try:
@@ -36,9 +44,9 @@ def main(argv: list[str]) -> int:
                 scene.close()
             key = f"{demo}/{backend_name}-{precision}"
             new = frame_hash(frame)
-            if record["hashes"].get(key) != new:
+            if hashes.get(key) != new:
                 print(f"changed: {key}")
-            record["hashes"][key] = new
+            hashes[key] = new
         backend.release()
     RECORD.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
     return 0
