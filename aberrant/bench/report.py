@@ -9,134 +9,16 @@ what could not run and why, and what was swept.
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from typing import Any
 
 from aberrant.bench.embree import MODES
 from aberrant.bench.images import image_section
-from aberrant.bench.markdown import markdown_table
+from aberrant.bench.markdown import markdown_table, millis, number, percent, times
 from aberrant.bench.paired import features_section, hotel_section, space_section
 from aberrant.bench.sweeps import SWEEPS
+from aberrant.bench.targets import base_rows, best_ratio, targets_section
 from engine.errors import AberrantError
-
-#: The goals: ratio to Embree at 800x800 (family -> minimum), overhead ratios, tick budget.
-EMBREE_GOALS: dict[str, float] = {"opencl f32": 1.0, "glsl f32": 0.6}
-TARGET_SCENES: tuple[str, ...] = ("mesh-10k", "mesh-200k")
-TARGET_SIZE: tuple[int, int] = (800, 800)
-OVERHEAD_SCENES: dict[str, tuple[str, float]] = {
-    "aberrations": ("ten-boxes-aberration", 1.3),
-    "portals": ("ten-boxes-portals", 1.2),
-}
-PLAIN_SCENE = "ten-boxes"
-TICK_BUDGET_MS = 1.0
-
-
-def _num(value: float | None, digits: int = 3) -> str:
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return "–"
-    if value == 0:
-        return "0"
-    if abs(value) >= 1e4 or abs(value) < 1e-3:
-        return f"{value:.2e}"
-    return f"{value:.{digits}g}"
-
-
-def _ms(value: float | None) -> str:
-    return "–" if value is None else f"{value:.1f}" if value >= 10 else f"{value:.2f}"
-
-
-def _pct(fraction: float | None) -> str:
-    return "–" if fraction is None else "0" if fraction == 0 else f"{100 * fraction:.3g} %"
-
-
-def _ratio(value: float | None) -> str:
-    return "–" if value is None else f"{value:.2f}x"
-
-
-def base_rows(results: dict[str, Any]) -> dict[tuple[str, str], dict[str, Any]]:
-    """(scene, family) -> the family's base row (no knob swept) on that scene."""
-    return {(r["scene"], r["family"]): r for r in results["rows"] if r["setting"]["sweep"] in ("", "precision")}
-
-
-def best_ratio(row: dict[str, Any]) -> float:
-    """The row's ratio to Embree's rays/s: paired (same background load) when measured, and on the frame of
-    Embree's own outputs (the hits, no shading) where that was timed."""
-    paired = row.get("embree_trace_paired") or row.get("embree_paired")
-    return float(paired["ratio"]) if paired else float(row["embree_ratio"])
-
-
-def frame_ratio(row: dict[str, Any]) -> float | None:
-    """The whole frame's (shaded, colour read back) paired ratio to Embree, where the trace's was timed apart."""
-    paired = row.get("embree_paired")
-    return float(paired["ratio"]) if paired and row.get("embree_trace_paired") else None
-
-
-def _mark(ok: bool | None) -> str:
-    return "not measured" if ok is None else ("**met**" if ok else "**not met**")
-
-
-def _targets(results: dict[str, Any]) -> list[str]:
-    base = base_rows(results)
-    rows: list[list[str]] = []
-    for family, goal in EMBREE_GOALS.items():
-        for scene in TARGET_SCENES:
-            row = base.get((scene, family))
-            if row is None or row.get("embree_ratio") is None:
-                why = "not run" if row is None else (row["status"] if row["status"] != "ok" else row["embree_note"])
-                rows.append([f"{family} / Embree rays/s, {scene}", why or "–", f">= {goal}x", _mark(None)])
-                continue
-            at = tuple(row["size"])
-            note = "" if at == TARGET_SIZE else f" (at {at[0]}x{at[1]}; the goal is at 800x800)"
-            ratio = best_ratio(row)
-            ok = ratio >= goal if at == TARGET_SIZE else None
-            paired = row.get("embree_paired")
-            shaded = frame_ratio(row)
-            if shaded is not None:
-                how = f"the hits alone, paired; the shaded frame {_ratio(shaded)} paired, "
-                how += f"{_ratio(row['embree_ratio'])} from its medians, "
-            else:
-                how = f"paired; {_ratio(row['embree_ratio'])} from the medians, " if paired else ""
-            measured = f"{_ratio(ratio)} ({how}{_num(row['mrays_per_s'])} Mrays/s){note}"
-            rows.append([f"{family} / Embree rays/s, {scene}", measured, f">= {goal}x", _mark(ok)])
-    families = sorted({r["family"] for r in results["rows"]})
-    for kind, (scene, goal) in OVERHEAD_SCENES.items():
-        for family in families:
-            plain, deformed = base.get((PLAIN_SCENE, family)), base.get((scene, family))
-            label = f"{family}: {kind} over the view / plain frame time"
-            plain_ok = plain is not None and plain["status"] == "ok"
-            if deformed is None or (plain is None and not deformed.get("baseline_paired")):
-                rows.append([label, "not run", f"<= {goal}x", _mark(None)])
-            elif deformed["status"] != "ok" or not (deformed.get("baseline_paired") or plain_ok):
-                why = deformed["status"] if deformed["status"] != "ok" or plain is None else plain["status"]
-                rows.append([label, why, f"<= {goal}x", _mark(None)])
-            else:
-                paired = deformed.get("baseline_paired")
-                medians = (
-                    deformed["frame"]["median_ms"] / plain["frame"]["median_ms"]
-                    if plain is not None and plain_ok
-                    else None
-                )
-                slower = paired["inverse"] if paired else medians
-                assert slower is not None  # this branch has a paired run or an ok plain one
-                how = "paired" + (f"; {_ratio(medians)} from the medians" if medians else "") if paired else "medians"
-                rows.append([label, f"{_ratio(slower)} ({how})", f"<= {goal}x", _mark(slower <= goal)])
-    for entry in results.get("overhead", []):
-        label = f"engine tick without render ({entry['backend']}, 1,000 entities, one moving)"
-        if "median_ms" not in entry:
-            rows.append([label, entry.get("status", "–"), f"< {TICK_BUDGET_MS} ms, one row", _mark(None)])
-            continue
-        ok = entry["median_ms"] < TICK_BUDGET_MS and entry["one_row"]
-        upload = f"{entry['upload_bytes']} B ({'one table row' if entry['one_row'] else 'more than one row'})"
-        rows.append(
-            [
-                label,
-                f"{_ms(entry['median_ms'])} ms median, upload {upload}",
-                f"< {TICK_BUDGET_MS} ms, one row",
-                _mark(ok),
-            ]
-        )
-    return ["## Targets", "", *markdown_table(["target", "measured", "goal", "status"], rows), ""]
 
 
 def _headline(results: dict[str, Any]) -> list[str]:
@@ -153,11 +35,11 @@ def _headline(results: dict[str, Any]) -> list[str]:
                 cells.append(row["status"].split(":")[0])  # unsupported, error or skipped
             else:
                 unlit = "*" if (row.get("embree_paired") or {}).get("shadows_off") else ""
-                ratio = f" ({_ratio(best_ratio(row))}{unlit})" if row.get("embree_ratio") is not None else ""
-                cells.append(f"{_num(row['mrays_per_s'])}{ratio}")
+                ratio = f" ({times(best_ratio(row))}{unlit})" if row.get("embree_ratio") is not None else ""
+                cells.append(f"{number(row['mrays_per_s'])}{ratio}")
         size = "x".join(map(str, info["fixed_size"] or results["config"]["size"]))
         entry = results["embree"].get(scene, {}).get("sizes", {}).get(size, {})
-        cells.append(_num(entry["mrays_per_s"]) if entry.get("status") == "ok" else "–")
+        cells.append(number(entry["mrays_per_s"]) if entry.get("status") == "ok" else "–")
         rows.append([scene, f"{info['triangles']:,}", size, *cells])
     header = ["scene", "triangles", "size", *[f"{f} Mrays/s (x Embree)" for f in families], "Embree Mrays/s"]
     return [
@@ -183,8 +65,8 @@ def _overhead(results: dict[str, Any]) -> list[str]:
     rows = [
         [
             e["backend"],
-            f"{_ms(e['median_ms'])} ({_ms(e['min_ms'])}–{_ms(e['max_ms'])})",
-            *[_ms(e["systems_ms"].get(s)) for s in systems],
+            f"{millis(e['median_ms'])} ({millis(e['min_ms'])}–{millis(e['max_ms'])})",
+            *[millis(e["systems_ms"].get(s)) for s in systems],
             f"{e['upload_bytes']} B",
             f"{e['tlas_upload_ticks']} of {e['ticks']}" if "tlas_upload_ticks" in e else "–",
             ", ".join(
@@ -228,10 +110,10 @@ def _embree(results: dict[str, Any]) -> list[str]:
                     scene,
                     size,
                     e["best"],
-                    *[_num(e["modes"][m]["mrays_per_s"]) for m in MODES],
-                    _ms(e["build_ms"]),
-                    _pct(err["mismatch"]),
-                    _num(err["depth_p99"]),
+                    *[number(e["modes"][m]["mrays_per_s"]) for m in MODES],
+                    millis(e["build_ms"]),
+                    percent(err["mismatch"]),
+                    number(err["depth_p99"]),
                 ]
             )
     notes = sorted({a["status"] for a in results["embree"].values() if a.get("status", "ok") != "ok"})
@@ -292,22 +174,22 @@ def _detail(results: dict[str, Any]) -> list[str]:
                 [
                     r["label"],
                     "x".join(map(str, r["size"])),
-                    f"{_ms(f['median_ms'])} ({_ms(f['min_ms'])}–{_ms(f['max_ms'])})",
-                    _num(r["mrays_per_s"]),
-                    _ratio(r.get("embree_ratio"))
-                    + (f" (paired {_ratio(r['embree_paired']['ratio'])})" if r.get("embree_paired") else "")
+                    f"{millis(f['median_ms'])} ({millis(f['min_ms'])}–{millis(f['max_ms'])})",
+                    number(r["mrays_per_s"]),
+                    times(r.get("embree_ratio"))
+                    + (f" (paired {times(r['embree_paired']['ratio'])})" if r.get("embree_paired") else "")
                     + (
-                        f" (hits only {_ratio(r['embree_trace_paired']['ratio'])})"
+                        f" (hits only {times(r['embree_trace_paired']['ratio'])})"
                         if r.get("embree_trace_paired")
                         else ""
                     ),
-                    _ms(r["first_frame_ms"]),
-                    f"{_ms(r['init_ms'])} / {_ms(r['pack_ms'])} / {_ms(r['upload_ms'])}",
-                    _ms(r["bvh_build_ms"]),
+                    millis(r["first_frame_ms"]),
+                    f"{millis(r['init_ms'])} / {millis(r['pack_ms'])} / {millis(r['upload_ms'])}",
+                    millis(r["bvh_build_ms"]),
                     f"{r['upload_bytes']:,} / {r['tick_static_bytes']} / {r.get('tick_moved_bytes')}",
-                    _pct(e["mismatch"]),
-                    f"{_num(e['depth_median'])} / {_num(e['depth_p99'])}",
-                    _num(e["perceived_p99"]),
+                    percent(e["mismatch"]),
+                    f"{number(e['depth_median'])} / {number(e['depth_p99'])}",
+                    number(e["perceived_p99"]),
                     str(e["nan_count"]),
                 ]
             )
@@ -392,8 +274,8 @@ def render_report(results: dict[str, Any]) -> str:
         f"**Devices:** {devices}; {m['embree']}.  ",
         f"**Run:** `{c['command'] or 'aberrant bench'}` on {results['started']}, took "
         f"{results['duration_s']:.0f} s; size {c['size'][0]}x{c['size'][1]}, repeat {c['repeat']}"
-        f"{', quick' if c['quick'] else ''}. Load average {_num(load.get('start'))} at the start, "
-        f"{_num(load.get('end'))} at the end (other work on the machine slows frames; ratios less so).",
+        f"{', quick' if c['quick'] else ''}. Load average {number(load.get('start'))} at the start, "
+        f"{number(load.get('end'))} at the end (other work on the machine slows frames; ratios less so).",
         "",
     ]
     machines = results.get("machines", {})
@@ -403,7 +285,7 @@ def render_report(results: dict[str, Any]) -> str:
             facts = f"{info['cpu']}, {info['cores']} cores; {info['platform']}; {_devices(info)}"
             lines.insert(-1, f"- **{name}:** {facts}.")
         lines.insert(-1, "")
-    lines += _targets(results) + _headline(results)
+    lines += targets_section(results) + _headline(results)
     lines += ["## Speed against error", "", "![frame time against error](speed_vs_error.png)", ""]
     lines += [
         results.get("plot_note", ""),

@@ -9,8 +9,8 @@ import pytest
 from conftest import require_backend
 
 from aberrant.bench.architecture import closed_portals, strips_mesh
-from aberrant.bench.report import best_ratio
 from aberrant.bench.scenes import bench_scenes, resolve_scenes
+from aberrant.bench.targets import best_ratio
 from aberrant.cli import main
 from components import Aberration, Mesh, Portal, Transform
 from demos import build_demo
