@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from scenes import render_scene
 from test_hard_portals import facing_corridor
+from test_parity_portals import portal_in_aberrations, portal_through_portal
 from test_space_tables import move
 
 from aberrant.bench.space import space_scene
@@ -127,10 +128,13 @@ def hotel_scene(folder: Path) -> Scene:
     return hotel.build()
 
 
-#: Scenes whose legs come out of portals walking the portal tree (forced on for the corridor's two doors),
-#: and the defines both frames get.
+#: Scenes whose legs come out of portals walking the portal tree (forced on where a scene has few doors: the
+#: corridor's two facing ones, doors inside metric and radial boxes, a door seen through a door), and the
+#: defines both frames get.
 CASES: dict[str, tuple[Callable[[Path], Scene], dict[str, int]]] = {
     "facing-corridor": (lambda folder: facing_corridor(max_events=8, turn_deg=7.0), {"PORTAL_TREE": 1}),
+    "portal-in-aberrations": (lambda folder: portal_in_aberrations(), {"PORTAL_TREE": 1}),
+    "portal-through-portal": (lambda folder: portal_through_portal(), {"PORTAL_TREE": 1}),
     "portals-in-view": (lambda folder: space_scene("portals", "in", 64), {}),
     "hotel": (hotel_scene, {}),
 }
