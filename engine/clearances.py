@@ -84,9 +84,10 @@ class BoxClearances:
         """Every box's values from scratch; returns every row."""
         self._set_solids(world_to_local, bounds_min, bounds_max)
         n = len(self._centre)
-        self._boxes = AabbTree.build(*self._box_bounds(np.arange(n)), margin=FAT_MARGIN)
+        # The trees only guide the branch and bound: split at the median, a tenth of the SAH's build time.
+        self._boxes = AabbTree.build(*self._box_bounds(np.arange(n)), margin=FAT_MARGIN, split="median")
         self._order_of = -1
-        self._instances = AabbTree.build(self._lo, self._hi, margin=FAT_MARGIN)
+        self._instances = AabbTree.build(self._lo, self._hi, margin=FAT_MARGIN, split="median")
         self._raw_instance = np.full(n, _FAR)
         self._raw_box = np.full(n, _FAR)
         self._partner_instance = np.full(n, -1, np.int64)

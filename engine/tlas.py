@@ -105,6 +105,19 @@ def _sah_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
     return best_order, best_k
 
 
+def _median_split(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, int]:
+    """An order of boxes ``lo``/``hi`` (n >= 2) and k = n // 2: halves along the axis their centres spread most
+    on. A few NumPy calls a node instead of the SAH's sweeps: for trees that only guide a branch and bound
+    (:mod:`engine.clearances`), whose answers do not depend on the tree's shape."""
+    centres = lo + hi
+    axis = int(np.argmax(centres.max(axis=0) - centres.min(axis=0)))
+    return np.argsort(centres[:, axis], kind="stable"), len(lo) // 2
+
+
+#: How a tree's nodes are split: the surface-area heuristic (trees the rays walk) or at the median.
+SPLITS = {"sah": _sah_split, "median": _median_split}
+
+
 @dataclass
 class AabbTree:
     """The packed node table and what an incremental update needs (host only)."""
@@ -125,6 +138,8 @@ class AabbTree:
     depth: int = 0
     #: Depth of each node (root 0).
     level: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int64))
+    #: How its nodes are split when it is built or rebuilt (:data:`SPLITS`).
+    split: str = "sah"
 
     @property
     def count(self) -> int:
@@ -134,8 +149,10 @@ class AabbTree:
     # --- building ----------------------------------------------------------------------------
 
     @classmethod
-    def build(cls, lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN, slack: float = 0.0) -> AabbTree:
-        """A tree over rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0.
+    def build(
+        cls, lo: np.ndarray, hi: np.ndarray, margin: float = FAT_MARGIN, slack: float = 0.0, split: str = "sah"
+    ) -> AabbTree:
+        """A tree over rows with exact world bounds ``lo``/``hi`` (n, 3), n >= 0, its nodes split by ``split``.
 
         The leaves start tight (grown by ``slack`` only): fat boxes of every instance overlap their neighbours'
         and made the walk over a level of many small instances a quarter slower; an instance gets its fat
@@ -144,7 +161,7 @@ class AabbTree:
         hi = np.asarray(hi, np.float64).reshape(-1, 3)
         fat_lo, fat_hi = fatten(lo, hi, 0.0, slack)
         empty = np.zeros(0, np.int64)
-        tree = cls(np.zeros(1, TLAS_NODE_DTYPE), fat_lo, fat_hi, empty, empty, margin, slack)
+        tree = cls(np.zeros(1, TLAS_NODE_DTYPE), fat_lo, fat_hi, empty, empty, margin, slack, split=split)
         tree._build()
         return tree
 
@@ -169,7 +186,7 @@ class AabbTree:
                 nodes["count"][node] = 1
                 self.leaf[rows[0]] = node
                 continue
-            order, k = _sah_split(self.fat_lo[rows], self.fat_hi[rows])
+            order, k = SPLITS[self.split](self.fat_lo[rows], self.fat_hi[rows])
             child = next_free
             next_free += 2
             nodes["first"][node] = child
