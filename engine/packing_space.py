@@ -151,13 +151,13 @@ class SpaceTables:
         if boxes and any(self._reordered(scene, e) for e in boxes):
             return None
         if portals:
-            rows = sorted({self.portals.row[e] for e in portals if e in self.portals.row})
-            rows = sorted(set(rows).union(*(self._sources.get(r, set()) for r in rows)))
+            moved = sorted({self.portals.row[e] for e in portals if e in self.portals.row})
+            rows = sorted(set(moved).union(*(self._sources.get(r, set()) for r in moved)))
             lo, hi = self._pack_portal_rows(scene, packed, rows)
             updates += [TableUpdate("portals", range(r, r + 1)) for r in rows]
             updates += self._refit(packed, self.portal_tree, rows, lo, hi, 0)
-            moved = sorted(self.portals.row[e] for e in portals if e in self.portals.row)
-            updates += self._store_portal_gaps(packed, self.portal_gaps.moved(*self._portal_solids(packed), moved, []))
+            gaps = self._store_portal_gaps(packed, self.portal_gaps.moved(*self._portal_solids(packed), moved, []))
+            updates += [u for u in gaps if u.rows is None or u.rows.start not in rows]  # not uploaded twice
         box_rows = sorted(self.boxes.row[e] for e in boxes if e in self.boxes.row)
         if box_rows:
             lo, hi = self._pack_box_rows(scene, packed, box_rows)
