@@ -19,13 +19,14 @@ import math
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager, nullcontext
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
 from backends import shared
 from backends.base import AOVS, Backend, Frame
 from backends.glsl.context import create_context, is_software, probe_context
+from backends.glsl.outputs import OUTPUT_BINDINGS, FrameOutputs
 from backends.glsl.split import QUEUE_BINDING, SplitDispatch
 from backends.glsl.tables import (
     CAMERA_BINDING,
@@ -44,20 +45,6 @@ from engine.records import Precision
 if TYPE_CHECKING:  # moderngl is imported lazily: importing this module must not need it
     import moderngl
 
-#: Storage-buffer bindings of the AOV outputs, after the scene tables' and the camera's.
-OUTPUT_BINDINGS: dict[str, int] = {
-    "depth": CAMERA_BINDING + 1,
-    "perceived": CAMERA_BINDING + 2,
-    "instance": CAMERA_BINDING + 3,
-    "events": CAMERA_BINDING + 4,
-}
-#: Bytes per pixel and read-back dtype of each storage-buffer AOV.
-_OUTPUT_DTYPES: dict[str, np.dtype] = {
-    "depth": np.dtype(np.float32),
-    "perceived": np.dtype(np.float32),
-    "instance": np.dtype(np.int32),
-    "events": np.dtype(np.uint32),
-}
 #: Pixels per run of 8 consecutive invocations (one SIMD vector on llvmpipe): a 4x2 block instead of a row
 #: of 8 diverges less in traversal. Interleaved A/B, 800x800 f32, CPU time per frame: mesh-10k 173 -> 169 ms,
 #: mesh-200k 222 -> 216 ms, ten-boxes 106 -> 104 ms (2x4 and Morton order: smaller gains). Same frames.
@@ -157,9 +144,7 @@ class GlslBackend(shared.UploadedScene, Backend):
         #: loop's body for every SIMD lane even when none needs it.
         self.split_passes: bool = self.software and self.view_tiles
         self._split = SplitDispatch()
-        self._outputs: dict[str, moderngl.Buffer] = {}
-        self._texture: moderngl.Texture | None = None
-        self._size: tuple[int, int] = (0, 0)
+        self._outputs = FrameOutputs()
         self._programs: dict[tuple[tuple[str, int], ...], moderngl.ComputeShader] = {}
         #: How many shader variants this backend has compiled (tests check the cache).
         self.compile_count = 0
@@ -213,7 +198,7 @@ class GlslBackend(shared.UploadedScene, Backend):
     @property
     def color_texture(self) -> moderngl.Texture | None:
         """The last frame's colour as an RGBA8 texture, texel row 0 = the image's top row (None before a frame)."""
-        return self._texture
+        return self._outputs.texture
 
     # --- upload ----------------------------------------------------------------------
 
@@ -333,28 +318,12 @@ class GlslBackend(shared.UploadedScene, Backend):
             return False
         return bool(features.portals or features.aberration_modes) and self._split.allowed
 
-    def _ensure_outputs(self, width: int, height: int, aovs: Sequence[str]) -> None:
-        """(Re)allocate the colour texture and the requested AOV buffers only when the size changes."""
-        ctx = self._context()
-        if self._size != (width, height):
-            for buffer in self._outputs.values():
-                buffer.release()
-            self._outputs.clear()
-            if self._texture is not None:
-                self._texture.release()
-            self._texture = ctx.texture((width, height), 4, dtype="f1")
-            self._size = (width, height)
-        for name in aovs:
-            if name in OUTPUT_BINDINGS and name not in self._outputs:
-                self._outputs[name] = ctx.buffer(reserve=width * height * _OUTPUT_DTYPES[name].itemsize)
-
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Dispatch one frame; reads back only the requested AOVs (``aovs=()``: the texture only)."""
         width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
         start = time.perf_counter()
         with self._current():
             ctx = self._context()
-            self._ensure_outputs(width, height, aovs)
             row = pack_camera(
                 camera, self._origin, self.precision, width, height, self._boxes, self._bounds, self._box_tree
             )
@@ -373,11 +342,7 @@ class GlslBackend(shared.UploadedScene, Backend):
             if tiles is not None:
                 self._device.bind_view_tiles(tiles.table)
             self._device.bind(row)
-            for name in aovs:
-                if name in OUTPUT_BINDINGS:
-                    self._outputs[name].bind_to_storage_buffer(OUTPUT_BINDINGS[name])
-            assert self._texture is not None
-            self._texture.bind_to_image(0, read=False, write=True)
+            self._outputs.bind(ctx, width, height, aovs)
             if program is None:
                 passes = (self._program({**defines, "SPLIT_PASS": 1}), self._program({**defines, "SPLIT_PASS": 2}))
                 self._split.run(ctx, passes, camera, (width, height), self.workgroup)
@@ -386,16 +351,7 @@ class GlslBackend(shared.UploadedScene, Backend):
                 program.run(math.ceil(width / gx), math.ceil(height / gy), 1)
             ctx.memory_barrier()
             dispatched = time.perf_counter()
-            frame = Frame(width, height)
-            if "color" in aovs:
-                data = self._texture.read(alignment=1)
-                frame.color = np.frombuffer(data, np.uint8).reshape(height, width, 4).copy()
-            for name in aovs:
-                if name not in OUTPUT_BINDINGS:
-                    continue
-                raw = np.frombuffer(self._outputs[name].read(), _OUTPUT_DTYPES[name]).reshape(height, width)
-                value: Any = raw.astype(np.uint8) if name == "events" else raw.copy()
-                setattr(frame, name, value)
+            frame = self._outputs.read(width, height, aovs)
         end = time.perf_counter()
         frame.timings_ms["dispatch"] = (dispatched - start) * 1e3
         frame.timings_ms["readback"] = (end - dispatched) * 1e3
@@ -410,16 +366,11 @@ class GlslBackend(shared.UploadedScene, Backend):
             return
         with self._current():
             self._device.release()
-            for buffer in self._outputs.values():
-                buffer.release()
+            self._outputs.release()
             self._split.release()
             for program in self._programs.values():
                 program.release()
-            if self._texture is not None:
-                self._texture.release()
-        self._outputs.clear()
         self._programs.clear()
-        self._texture = None
         if self._owns_context:
             self._ctx.release()
         self._ctx = None
