@@ -1,16 +1,50 @@
 /* pixel.h -- the kernels' entry point: a pixel's primary ray, its journey (journey.h) and the colour of
  * what it ends on (shade.h). */
 
-Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
+/* A pixel before its camera ray's journey: the sky, no hit. */
+FORCE_INLINE Pixel pixel_start(SCENE_DECL Camera cam)
 {
-    PIXEL_SCENE_OPEN
-    Ray ray = primary_ray(cam, i, j);
     Pixel px;
     px.color = quantize_rgba(SETTINGS.background.xyz);
     px.depth = F_INF;
     px.perceived = F_INF;
     px.instance = -1;
     px.events = 0;
+    return px;
+}
+
+/* The pixel px (pixel_start's) at the end of its camera ray's journey. */
+FORCE_INLINE Pixel pixel_end(SCENE_DECL Camera cam, Pixel px, Journey end)
+{
+#if SPLIT_PASS == 1
+    px.deferred = end.end == END_DEFERRED ? end.deferred : -2;
+#endif
+    Ray ray = end.ray;
+    MeshHit hit = end.hit;
+    if (end.end == END_LIMIT) {
+        px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
+    }
+    /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
+     * code masked on every pass. */
+    if (hit.instance >= 0) {
+        real len_r = ray.r_len;
+#if SHADE
+        real3 position = ray.o + hit.t * ray.r;
+        px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
+#endif
+        px.depth = TO_FLOAT(ray.L + hit.t * len_r);
+        px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
+        px.instance = INSTANCE(hit.instance).meta.z;
+    }
+    px.events = ray.n;
+    return px;
+}
+
+Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
+{
+    PIXEL_SCENE_OPEN
+    Ray ray = primary_ray(cam, i, j);
+    Pixel px = pixel_start(SCENE_PASS cam);
 #if HAS_ABERRATIONS
     /* The radial mode's bounds from the camera's corner rays; the transition into the camera's box. */
     real3 sigma_lo = cam.sigma_min.xyz;
@@ -31,26 +65,5 @@ Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
     int tile = (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);
 #endif
     Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false) TILED_ARG(true, tile));
-#if SPLIT_PASS == 1
-    px.deferred = end.end == END_DEFERRED ? end.deferred : -2;
-#endif
-    ray = end.ray;
-    MeshHit hit = end.hit;
-    if (end.end == END_LIMIT) {
-        px.color = quantize_rgba(SETTINGS.event_limit_color.xyz);
-    }
-    /* A mesh: shade it here, once, not in the loop, where SIMD lanes (llvmpipe) would run the shading
-     * code masked on every pass. */
-    if (hit.instance >= 0) {
-        real len_r = ray.r_len;
-#if SHADE
-        real3 position = ray.o + hit.t * ray.r;
-        px.color = quantize_rgba(shade(SCENE_PASS cam, hit, ray.r, position));
-#endif
-        px.depth = TO_FLOAT(ray.L + hit.t * len_r);
-        px.perceived = TO_FLOAT(ray.Lambda + (hit.t - ray.t_piece) * len_r * ray.f);
-        px.instance = INSTANCE(hit.instance).meta.z;
-    }
-    px.events = ray.n;
-    return px;
+    return pixel_end(SCENE_PASS cam, px, end);
 }
