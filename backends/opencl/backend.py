@@ -38,6 +38,7 @@ from backends.opencl.devices import (
     pocl_version,
     select_device,
 )
+from backends.opencl.packets import packet_frame, work_size
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -53,6 +54,7 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.shared", "layout.h"),
     ("backends.shared", "bindings_cl.h"),
     *(("backends.shared", name) for name in shared.TRACER_FILES),
+    ("backends.opencl", "packet.cl"),
     ("backends.opencl", "trace.cl"),
 )
 #: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.
@@ -152,6 +154,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._program_keys: dict[int, tuple[str, tuple[str, ...]]] = {}
         #: How many program variants this backend has built (tests check the cache).
         self.compile_count = 0
+        #: Whether the last frame traced its camera rays eight at a time (packets.py; tests).
+        self.last_frame_packets = False
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
         self.extra_defines: dict[str, int] = {}
         #: Program build options (benchmarks may compare others; part of each kernel's cache key).
@@ -325,6 +329,13 @@ class OpenClBackend(shared.UploadedScene, Backend):
                 nbytes = width * height * dtype.itemsize * int(np.prod(tail, dtype=np.int64))
                 self._outputs[name] = self._cl.Buffer(self._context(), self._cl.mem_flags.WRITE_ONLY, nbytes)
 
+    def _global_size(self, items: tuple[int, int]) -> tuple[int, int]:
+        """The launch size of ``items`` work-items: rounded up to whole work-groups where their size is set."""
+        if self.local_size is None:
+            return items
+        lx, ly = self.local_size
+        return (-(-items[0] // lx) * lx, -(-items[1] // ly) * ly)
+
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Launch one frame; reads back only the requested AOVs."""
         width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
@@ -340,6 +351,9 @@ class OpenClBackend(shared.UploadedScene, Backend):
         defines.update(self._frame_space_defines(features, self._camera_row, self.precision))
         defines.update(self.extra_defines)
         defines.update(shared.view_tile_defines(tiles))
+        packets = packet_frame(defines, self.extra_defines.get("PACKET_PRIMARY", 1))
+        defines["PACKET_PRIMARY"] = int(packets)
+        self.last_frame_packets = packets
         kernel = self._kernel(defines)
         self._ensure_outputs(width, height, aovs)
         self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
@@ -354,12 +368,9 @@ class OpenClBackend(shared.UploadedScene, Backend):
         args += [self._camera, self._view_tiles]
         args += [self._outputs[name] if name in aovs else None for name in AOVS]
         self._bind(kernel, args)
-        if self.local_size is None:
-            global_size: tuple[int, int] = (width, height)
-        else:
-            lx, ly = self.local_size
-            global_size = (-(-width // lx) * lx, -(-height // ly) * ly)
-        self._cl.enqueue_nd_range_kernel(queue, kernel, global_size, self.local_size)
+        self._cl.enqueue_nd_range_kernel(
+            queue, kernel, self._global_size(work_size(width, height, packets)), self.local_size
+        )
         queue.finish()
         traced = time.perf_counter()
         cache.record_once((self._program_keys[id(kernel)], self.local_size))

@@ -4,12 +4,22 @@
 /* The ray (camera-relative world o, d) against one instance: into object space with
  * world_to_object, the direction left unnormalised so t stays the world t; then the
  * asset's BVH from its root, nearest child first, with a small stack. */
+/* A point and a direction (camera-relative world) in instance inst's object space (world_to_object). */
+FORCE_INLINE real3 object_point(Instance inst, real3 o)
+{
+    return R3(dot(inst.w2o0.xyz, o) + inst.w2o0.w, dot(inst.w2o1.xyz, o) + inst.w2o1.w,
+              dot(inst.w2o2.xyz, o) + inst.w2o2.w);
+}
+FORCE_INLINE real3 object_vector(Instance inst, real3 d)
+{
+    return R3(dot(inst.w2o0.xyz, d), dot(inst.w2o1.xyz, d), dot(inst.w2o2.xyz, d));
+}
+
 FORCE_INLINE MeshHit trace_instance(SCENE_DECL MeshHit best, int row, real3 o, real3 d, real t_min STOP_DECL)
 {
     Instance inst = INSTANCE(row);
-    real3 oo = R3(dot(inst.w2o0.xyz, o) + inst.w2o0.w, dot(inst.w2o1.xyz, o) + inst.w2o1.w,
-                  dot(inst.w2o2.xyz, o) + inst.w2o2.w);
-    real3 dd = R3(dot(inst.w2o0.xyz, d), dot(inst.w2o1.xyz, d), dot(inst.w2o2.xyz, d));
+    real3 oo = object_point(inst, o);
+    real3 dd = object_vector(inst, d);
     bool cull = MATERIAL(inst.meta.y).flags.x != 0;
     ShearedRay sr = shear_ray(oo, dd);
     int root = inst.meta.x;

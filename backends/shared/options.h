@@ -192,3 +192,8 @@
 #if SPLIT_PASS && HAS_SHADOWS
 #error "SPLIT_PASS: the first pass has no event loop for shadow rays"
 #endif
+/* Camera rays eight at a time, a 4x2 block of pixels a work-item (OpenCL, backends/opencl/packet.cl): the
+ * host sets it for the frames that qualify (backends/opencl/packets.py). 0: one ray a work-item. */
+#ifndef PACKET_PRIMARY
+#define PACKET_PRIMARY 0
+#endif
