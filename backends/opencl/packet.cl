@@ -237,7 +237,7 @@ FORCE_INLINE PacketHit packet_instance(SCENE_DECL PacketHit best, int row, float
                                        const float *dy, const float *dz, float8 t_min, int8 live)
 {
     Instance inst = INSTANCE(row);
-    float lanes[15][8];
+    float lanes[12][8];
     int axes[3][8];
     for (int k = 0; k < 8; ++k) {
         real3 d = R3(dx[k], dy[k], dz[k]);

@@ -85,8 +85,7 @@ __kernel void trace(__global const Settings* settings,
     int i0 = i * PACKET_W;
     int j0 = j * PACKET_H;
 #if INSTANCE_TILES_ONLY
-    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
-    int4 list = view_tiles[(j0 >> VIEW_TILE_LOG2) * tiles_x + (i0 >> VIEW_TILE_LOG2)].entry;
+    int4 list = view_tiles[view_tile_of(cam, i0, j0)].entry;
     int first = list.z;
     int count = list.w;
 #else
@@ -116,6 +115,7 @@ __kernel void trace(__global const Settings* settings,
     vstore8(hits.w, 0, hw);
     vstore8(hits.instance, 0, hi);
     vstore8(hits.triangle, 0, htri);
+    Pixel sky = pixel_start(sc, cam); /* the same for every pixel */
     for (int k = 0; k < 8; ++k) {
         int pi = i0 + k % PACKET_W;
         int pj = j0 + k / PACKET_W;
@@ -128,7 +128,7 @@ __kernel void trace(__global const Settings* settings,
             end.hit.instance = hi[k];
             end.hit.triangle = htri[k];
             end.end = hi[k] >= 0 ? END_MESH : END_MISS;
-            Pixel px = pixel_end(sc, cam, pixel_start(sc, cam), end);
+            Pixel px = pixel_end(sc, cam, sky, end);
             write_pixel(px, pj * cam.size.x + pi, color_out, depth_out, perceived_out, instance_out, events_out);
         }
     }

@@ -40,6 +40,15 @@ FORCE_INLINE Pixel pixel_end(SCENE_DECL Camera cam, Pixel px, Journey end)
     return px;
 }
 
+#if VIEW_TILES || INSTANCE_TILES
+/* The view tile (engine/view_tiles.py, row-major tiles of 2^VIEW_TILE_LOG2 pixels) holding pixel (i, j). */
+FORCE_INLINE int view_tile_of(Camera cam, int i, int j)
+{
+    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
+    return (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);
+}
+#endif
+
 Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
 {
     PIXEL_SCENE_OPEN
@@ -61,8 +70,7 @@ Pixel trace_pixel(PIXEL_SCENE_DECL Camera cam, int i, int j)
 #endif
 #if VIEW_TILES || INSTANCE_TILES
     /* The view tile of the pixel (engine/view_tiles.py): its lists serve the first leg. */
-    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
-    int tile = (j >> VIEW_TILE_LOG2) * tiles_x + (i >> VIEW_TILE_LOG2);
+    int tile = view_tile_of(cam, i, j);
 #endif
     Journey end = journey(SCENE_PASS cam, ray, cam.lens.z, REAL_MAX OCCLUSION_ARG(false) TILED_ARG(true, tile));
     return pixel_end(SCENE_PASS cam, px, end);
