@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -39,6 +40,8 @@ from backends.opencl.devices import (
     select_device,
 )
 from backends.opencl.packets import packet_frame, work_size
+from backends.opencl.tile_order import TileLaunch, tile_order
+from backends.shared.frame_tiles import portal_free_tiles
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -58,7 +61,7 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.opencl", "trace.cl"),
 )
 #: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.
-KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", *(f"{name}_out" for name in AOVS))
+KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", "tile_order", *(f"{name}_out" for name in AOVS))
 #: The BVH width each precision traverses fastest (see ``OpenClBackend.bvh_width``). The default
 #: ``BvhParams`` build the 8-wide trees too: CPU time per 800x800 frame (mesh-10k / mesh-200k /
 #: ten-boxes, PoCL 3.1) was within 1 % for traversal cost 0.3, 0.5 or 2.0, and worse for leaves of
@@ -145,6 +148,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._camera_row: np.ndarray | None = None  # kept alive while its non-blocking copy runs
         self._view_tiles = self._cl.Buffer(self._ctx, mf.READ_ONLY, layout.VIEW_TILE_DTYPE.itemsize)
         self._view_tile_rows: np.ndarray | None = None  # likewise
+        self._tile_order = self._cl.Buffer(self._ctx, mf.READ_ONLY, 4)
+        self._tile_order_rows: np.ndarray | None = None  # likewise
         self._outputs: dict[str, cl.Buffer] = {}
         self._size: tuple[int, int] = (0, 0)
         self._kernels: dict[tuple[tuple[str, int], ...], cl.Kernel] = {}
@@ -154,8 +159,10 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._program_keys: dict[int, tuple[str, tuple[str, ...]]] = {}
         #: How many program variants this backend has built (tests check the cache).
         self.compile_count = 0
-        #: Whether the last frame traced its camera rays eight at a time (packets.py; tests).
+        #: Whether the last frame traced its camera rays eight at a time (packets.py; tests) ...
         self.last_frame_packets = False
+        #: ... and the rows of its tile order's launches (tile_order.py), None for one launch over the image.
+        self.last_frame_tiles: tuple[int, ...] | None = None
         #: Extra defines for every variant (benchmarks: ``{"BRUTE_FORCE": 1}``).
         self.extra_defines: dict[str, int] = {}
         #: Program build options (benchmarks may compare others; part of each kernel's cache key).
@@ -336,6 +343,41 @@ class OpenClBackend(shared.UploadedScene, Backend):
         lx, ly = self.local_size
         return (-(-items[0] // lx) * lx, -(-items[1] // ly) * ly)
 
+    def _frame_defines(
+        self, features: Features, tiles: shared.FrameTiles | None, aovs: Sequence[str]
+    ) -> dict[str, int]:
+        """A frame's kernel defines: the scene's, the camera row's proofs, the view tiles' and packets where the
+        frame qualifies (packets.py)."""
+        assert self._camera_row is not None
+        defines = self._defines(features)
+        defines["SHADE"] = int("color" in aovs)  # a frame without colour skips the shading (and its shadow rays)
+        defines.update(self._frame_space_defines(features, self._camera_row, self.precision))
+        defines.update(self.extra_defines)
+        defines.update(shared.view_tile_defines(tiles))
+        defines["PACKET_PRIMARY"] = int(packet_frame(defines, self.extra_defines.get("PACKET_PRIMARY", 1)))
+        defines["TILE_ORDER"] = 0
+        return defines
+
+    def _frame_launches(
+        self, features: Features, tiles: shared.FrameTiles | None, width: int, height: int, aovs: Sequence[str]
+    ) -> tuple[list[tuple[dict[str, int], TileLaunch | None]], np.ndarray | None]:
+        """The frame's launches (defines, tiles or None for the image's grid) and the tile order they read: a
+        frame with portals whose Euclidean variant takes packets traces the tiles that meet no portal with it
+        (tile_order.py), ``TILE_ORDER=0`` in the extra defines keeps one launch."""
+        defines = self._frame_defines(features, tiles, aovs)
+        free = portal_free_tiles(tiles, features, width, height) if self.extra_defines.get("TILE_ORDER", 1) else None
+        if free is None or tiles is None:
+            return [(defines, None)], None
+        plain = self._frame_defines(
+            replace(features, portals=False), replace(tiles, portals=False, instances_only=True), aovs
+        )
+        if not plain["PACKET_PRIMARY"]:
+            return [(defines, None)], None
+        local = None if self.local_size is None else self.local_size[0] * self.local_size[1]
+        order, launches = tile_order([(np.flatnonzero(free), True), (np.flatnonzero(~free), False)], local)
+        plain["TILE_ORDER"] = defines["TILE_ORDER"] = 1
+        return [(plain, launches[0]), (defines, launches[1])], order
+
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Launch one frame; reads back only the requested AOVs."""
         width, height = self.check_request(width, height, aovs, uploaded=self._uploaded)
@@ -346,34 +388,32 @@ class OpenClBackend(shared.UploadedScene, Backend):
         )
         features = self._frame_features(camera, width, height, shade="color" in aovs)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
-        defines = self._defines(features)
-        defines["SHADE"] = int("color" in aovs)  # a frame without colour skips the shading (and its shadow rays)
-        defines.update(self._frame_space_defines(features, self._camera_row, self.precision))
-        defines.update(self.extra_defines)
-        defines.update(shared.view_tile_defines(tiles))
-        packets = packet_frame(defines, self.extra_defines.get("PACKET_PRIMARY", 1))
-        defines["PACKET_PRIMARY"] = int(packets)
-        self.last_frame_packets = packets
-        kernel = self._kernel(defines)
+        launches, order = self._frame_launches(features, tiles, width, height, aovs)
+        kernels = [self._kernel(defines) for defines, _ in launches]
+        self.last_frame_packets = any(defines["PACKET_PRIMARY"] for defines, _ in launches)
+        self.last_frame_tiles = None if order is None else tuple(launch.rows for _, launch in launches if launch)
         self._ensure_outputs(width, height, aovs)
         self._cl.enqueue_copy(queue, self._camera, self._camera_row, is_blocking=False)
         if tiles is not None:
-            table = tiles.table
-            if self._view_tiles.size < table.nbytes:
-                self._view_tiles.release()
-                self._view_tiles = self._cl.Buffer(self._context(), self._cl.mem_flags.READ_ONLY, 2 * table.nbytes)
-            self._view_tile_rows = table
-            self._cl.enqueue_copy(queue, self._view_tiles, table, is_blocking=False)
+            self._view_tiles, self._view_tile_rows = self._staged(self._view_tiles, tiles.table)
+        if order is not None:
+            self._tile_order, self._tile_order_rows = self._staged(self._tile_order, order)
         args: list[cl.Buffer | None] = [self._tables[name] for name in layout.TABLES]
-        args += [self._camera, self._view_tiles]
+        args += [self._camera, self._view_tiles, self._tile_order]
         args += [self._outputs[name] if name in aovs else None for name in AOVS]
-        self._bind(kernel, args)
-        self._cl.enqueue_nd_range_kernel(
-            queue, kernel, self._global_size(work_size(width, height, packets)), self.local_size
-        )
+        for kernel, (defines, launch) in zip(kernels, launches, strict=True):
+            self._bind(kernel, args)
+            if launch is None:
+                items = work_size(width, height, bool(defines["PACKET_PRIMARY"]))
+                self._cl.enqueue_nd_range_kernel(queue, kernel, self._global_size(items), self.local_size)
+            elif launch.rows:
+                self._cl.enqueue_nd_range_kernel(
+                    queue, kernel, launch.global_size, launch.local_size, global_work_offset=launch.global_offset
+                )
         queue.finish()
         traced = time.perf_counter()
-        cache.record_once((self._program_keys[id(kernel)], self.local_size))
+        for kernel in kernels:
+            cache.record_once((self._program_keys[id(kernel)], self.local_size))
         frame = Frame(width, height)
         for name in aovs:
             dtype, tail = AOV_DTYPES[name]
@@ -387,6 +427,15 @@ class OpenClBackend(shared.UploadedScene, Backend):
         frame.timings_ms["render"] = (end - start) * 1e3
         return frame
 
+    def _staged(self, buffer: cl.Buffer, rows: np.ndarray) -> tuple[cl.Buffer, np.ndarray]:
+        """``rows`` copied into ``buffer`` without waiting (regrown to twice their size where they do not fit);
+        the buffer and the rows, which must stay alive until the frame's queue finishes."""
+        if buffer.size < rows.nbytes:
+            buffer.release()
+            buffer = self._cl.Buffer(self._context(), self._cl.mem_flags.READ_ONLY, 2 * rows.nbytes)
+        self._cl.enqueue_copy(self._queue, buffer, rows, is_blocking=False)
+        return buffer, rows
+
     # --- teardown -----------------------------------------------------------------------
 
     def release(self) -> None:
@@ -395,7 +444,13 @@ class OpenClBackend(shared.UploadedScene, Backend):
         if self._ctx is None:
             return
         self._queue.finish()
-        for buffer in [*self._tables.values(), *self._outputs.values(), self._camera, self._view_tiles]:
+        for buffer in [
+            *self._tables.values(),
+            *self._outputs.values(),
+            self._camera,
+            self._view_tiles,
+            self._tile_order,
+        ]:
             buffer.release()
         self._tables.clear()
         self._outputs.clear()
@@ -405,5 +460,6 @@ class OpenClBackend(shared.UploadedScene, Backend):
         self._bound.clear()
         self._camera_row = None
         self._view_tile_rows = None
+        self._tile_order_rows = None
         self._ctx = None
         self._uploaded = False

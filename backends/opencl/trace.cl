@@ -2,7 +2,7 @@
  * tracer files, options.h to pixel.h).
  *
  * One work-item per pixel (with PACKET_PRIMARY, per 4x2 block: packet.cl), row 0 = the image's top row. The scene tables come
- * in the order of engine.layout.TABLES, then the camera row and the view tiles, then one buffer
+ * in the order of engine.layout.TABLES, then the camera row, the view tiles and the tile order, then one buffer
  * per AOV. An AOV the caller did not ask for is passed as a NULL buffer and
  * skipped by a uniform branch, so one program serves every AOV set with the
  * colour (a PoCL build costs seconds; a never-taken branch costs nothing), and
@@ -46,15 +46,34 @@ __kernel void trace(__global const Settings* settings,
                     __global const Texel* texels,
                     __global const Camera* camera,
                     __global const ViewTile* view_tiles,
+                    __global const int* tile_order,
                     __global uchar4* color_out,
                     __global float* depth_out,
                     __global float* perceived_out,
                     __global int* instance_out,
                     __global uchar* events_out)
 {
+    Camera cam = camera[0];
+#if TILE_ORDER
+    /* The work-item's tile from the frame's list, its pixel (or block) within it from the first id. */
+    int tile = tile_order[get_global_id(1)];
+    if (tile < 0) {
+        return; /* the list's padding to whole work-groups */
+    }
+    int tiles_x = (cam.size.x + (1 << VIEW_TILE_LOG2) - 1) >> VIEW_TILE_LOG2;
+    int item = (int)get_global_id(0);
+#if PACKET_PRIMARY
+    int blocks_x = (1 << VIEW_TILE_LOG2) / PACKET_W;
+    int i = (tile % tiles_x) * blocks_x + item % blocks_x;
+    int j = (tile / tiles_x) * ((1 << VIEW_TILE_LOG2) / PACKET_H) + item / blocks_x;
+#else
+    int i = ((tile % tiles_x) << VIEW_TILE_LOG2) + (item & ((1 << VIEW_TILE_LOG2) - 1));
+    int j = ((tile / tiles_x) << VIEW_TILE_LOG2) + (item >> VIEW_TILE_LOG2);
+#endif
+#else
     int i = (int)get_global_id(0);
     int j = (int)get_global_id(1);
-    Camera cam = camera[0];
+#endif
 #if PACKET_PRIMARY
     if (i * PACKET_W >= cam.size.x || j * PACKET_H >= cam.size.y) {
         return;

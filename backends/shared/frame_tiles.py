@@ -11,7 +11,7 @@ import numpy as np
 from engine.camera_view import CameraView
 from engine.packed import Features
 from engine.portal_legs import portal_legs
-from engine.view_tiles import TILE_LOG2, view_tiles
+from engine.view_tiles import TILE_LOG2, tile_grid, view_tiles
 
 if TYPE_CHECKING:
     from backends.shared import UploadedScene
@@ -134,3 +134,18 @@ def frame_view_tiles(
     )
     free = legs is not None and bool(scene.extra_defines.get("PORTAL_LEGS_FREE", 1))
     return FrameTiles(table, bool(portals), bool(instances), only, legs is not None, free)
+
+
+def portal_free_tiles(tiles: FrameTiles | None, features: Features, width: int, height: int) -> np.ndarray | None:
+    """Per view tile, whether its camera rays' first legs meet no portal and take their instances from the tile's
+    list: the frame's Euclidean variant gives those pixels to the bit (one leg, the same list, no event), so a
+    frame with portals may trace them with it (OpenCL's TILE_ORDER). None where the frame cannot split: no
+    portal lists, boxes or shadow rays (which may meet what no camera ray does), or no such tile."""
+    if tiles is None or not (tiles.portals and tiles.instances) or tiles.portal_legs:
+        return None
+    if not features.portals or features.aberration_modes or features.shadows:
+        return None
+    tiles_x, tiles_y = tile_grid(width, height)
+    heads = tiles.table["entry"][: tiles_x * tiles_y]
+    free = (heads[:, 1] == 0) & (heads[:, 3] >= 0)
+    return free if free.any() else None

@@ -197,3 +197,12 @@
 #ifndef PACKET_PRIMARY
 #define PACKET_PRIMARY 0
 #endif
+/* Work-items over a list of view tiles (OpenCL's tile_order argument, -1 for padding), each a tile's pixel or,
+ * with PACKET_PRIMARY, its 4x2 block: a frame with portals traces the tiles whose first legs meet none with
+ * the Euclidean variant and the others with its own (backends/opencl/tile_order.py). 0: the image's grid. */
+#ifndef TILE_ORDER
+#define TILE_ORDER 0
+#endif
+#if TILE_ORDER && !(INSTANCE_TILES || VIEW_TILES)
+#error "TILE_ORDER: the work-items' tiles are the view tiles"
+#endif

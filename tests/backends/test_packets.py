@@ -40,15 +40,23 @@ def culled_crowd() -> Scene:
     return scene
 
 
+def on_and_off(backend, scene: Scene, size: tuple[int, int], off: dict[str, int], used=lambda b: b.last_frame_packets):
+    """The scene's frame as the backend chooses and with the ``off`` extra defines, and what ``used`` reads of the
+    backend after each."""
+    backend.extra_defines = {}
+    chosen = render(backend, scene, size)
+    chosen_used = used(backend)
+    backend.extra_defines = dict(off)
+    other = render(backend, scene, size)
+    other_used = used(backend)
+    backend.extra_defines = {}
+    return chosen, other, chosen_used, other_used
+
+
 def packets_and_rays(backend, scene: Scene, size: tuple[int, int]):
     """The scene's frame in packets and with one ray a work-item, and whether the first used packets."""
-    backend.extra_defines = {}
-    packed = render(backend, scene, size)
-    used = backend.last_frame_packets
-    backend.extra_defines = dict(SCALAR)
-    single = render(backend, scene, size)
-    assert not backend.last_frame_packets
-    backend.extra_defines = {}
+    packed, single, used, single_used = on_and_off(backend, scene, size, SCALAR)
+    assert not single_used
     return packed, single, used
 
 
