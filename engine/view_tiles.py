@@ -20,6 +20,7 @@ import numpy as np
 
 from engine import layout
 from engine.camera_view import CameraView, seen_instances, seen_leaves
+from engine.tlas import SPACE_SLACK
 from engine.tlas_wide import TlasLanes
 
 #: log2 of a tile's side in pixels: 8 x 8, the GLSL backend's work-group, whose 4 x 2 lane blocks each lie in
@@ -112,6 +113,60 @@ def leaf_tiles(
     out[off] = (0, 0, -1, -1)
     out[near] = (0, 0, tiles_x - 1, tiles_y - 1)
     return out, distance
+
+
+def quad_tiles(
+    view: CameraView, width: int, height: int, origin: np.ndarray, corners: np.ndarray, log2: int = TILE_LOG2
+) -> np.ndarray:
+    """Per tile (row-major), whether one of its primary rays can pass through one of the quads ``corners`` (n, 4,
+    3, in order around each quad, camera-relative): each quad's tiles by :func:`leaf_tiles` of its box, less
+    those its padded image's edges separate from the tile (a door seen at a slant covers far fewer tiles than
+    its box's rect). The image of a quad wholly in front of the camera is the convex hull of its corners'
+    images; a quad near the camera plane keeps its rect (every tile)."""
+    tiles_x, tiles_y = tile_grid(width, height, log2)
+    rects, _ = leaf_tiles(view, width, height, origin, corners.min(axis=1), corners.max(axis=1), log2)
+    apex = np.asarray(view.position, dtype=np.float64) - origin
+    relative = corners - apex
+    local = relative @ view.rotation  # right, up, back
+    depth = -local[..., 2]
+    reach = np.linalg.norm(relative, axis=2).max(axis=1)
+    near = depth.min(axis=1) <= NEAR_PLANE * np.maximum(1.0, reach)
+    t = math.tan(math.radians(view.fov_deg) / 2.0)
+    scale_u, scale_v = width / (2.0 * (width / height) * t), height / (2.0 * t)
+    safe = np.where(depth > 0.0, depth, 1.0)
+    x, y = local[..., 0] / safe, local[..., 1] / safe
+    image = np.stack([x * scale_u + width / 2.0, height / 2.0 - y * scale_v], axis=2)  # (n, 4, 2)
+    # The pad: leaf_tiles' pixels and margin, and how far the rays' and the quads' rounding (the kernels' pad, the
+    # space trees' slack) can move a point of the quad's image, from its nearest corner.
+    grow = 2.0 * KERNEL_PAD * max(1.0, float(np.linalg.norm(apex))) + SPACE_SLACK * (
+        1.0 + np.abs(corners).max(axis=(1, 2))
+    )
+    slope = 1.0 + np.maximum(np.abs(x), np.abs(y)).max(axis=1)
+    pad = PIXEL_PAD + RANGE_MARGIN * (np.abs(image).max(axis=(1, 2)) + width + height)
+    pad = pad + 4.0 * grow * max(scale_u, scale_v) * slope / np.where(near, 1.0, depth.min(axis=1))
+    # Each edge's outward normal (none for an edge through the centre: a quad seen edge-on keeps its rect).
+    edge = np.roll(image, -1, axis=1) - image
+    normal = np.stack([edge[..., 1], -edge[..., 0]], axis=2)
+    side = np.einsum("nkc,nkc->nk", normal, image.mean(axis=1, keepdims=True) - image)
+    normal = np.where((side < 0.0)[..., None], normal, np.where((side > 0.0)[..., None], -normal, 0.0))
+    normal[near] = 0.0
+    # Every (quad, tile) pair of the rects; a tile is cut off where, for some edge, its nearest corner lies
+    # beyond the padded edge.
+    w = np.maximum(rects[:, 2] - rects[:, 0] + 1, 0)
+    h = np.maximum(rects[:, 3] - rects[:, 1] + 1, 0)
+    area = w * h
+    quad = np.repeat(np.arange(len(rects)), area)
+    down, across = np.divmod(np.arange(len(quad)) - np.repeat(np.cumsum(area) - area, area), np.repeat(w, area))
+    tx, ty = rects[quad, 0] + across, rects[quad, 1] + down
+    side_px = float(1 << log2)
+    n = normal[quad]  # (pairs, 4, 2)
+    nearest_x = np.where(n[..., 0] > 0.0, tx[:, None] * side_px, (tx[:, None] + 1) * side_px)
+    nearest_y = np.where(n[..., 1] > 0.0, ty[:, None] * side_px, (ty[:, None] + 1) * side_px)
+    beyond = n[..., 0] * (nearest_x - image[quad, :, 0]) + n[..., 1] * (nearest_y - image[quad, :, 1])
+    cut = (beyond > pad[quad, None] * np.linalg.norm(n, axis=2)).any(axis=1)
+    covered = np.zeros(tiles_x * tiles_y, bool)
+    covered[(ty * tiles_x + tx)[~cut]] = True
+    return covered
 
 
 def tile_rows(

@@ -359,13 +359,20 @@ class OpenClBackend(shared.UploadedScene, Backend):
         return defines
 
     def _frame_launches(
-        self, features: Features, tiles: shared.FrameTiles | None, width: int, height: int, aovs: Sequence[str]
+        self,
+        camera: CameraView,
+        features: Features,
+        tiles: shared.FrameTiles | None,
+        width: int,
+        height: int,
+        aovs: Sequence[str],
     ) -> tuple[list[tuple[dict[str, int], TileLaunch | None]], np.ndarray | None]:
         """The frame's launches (defines, tiles or None for the image's grid) and the tile order they read: a
         frame with portals whose Euclidean variant takes packets traces the tiles that meet no portal with it
         (tile_order.py), ``TILE_ORDER=0`` in the extra defines keeps one launch."""
         defines = self._frame_defines(features, tiles, aovs)
-        free = portal_free_tiles(tiles, features, width, height) if self.extra_defines.get("TILE_ORDER", 1) else None
+        wanted = self.extra_defines.get("TILE_ORDER", 1)
+        free = portal_free_tiles(self, camera, tiles, features, width, height) if wanted else None
         if free is None or tiles is None:
             return [(defines, None)], None
         plain = self._frame_defines(
@@ -388,7 +395,7 @@ class OpenClBackend(shared.UploadedScene, Backend):
         )
         features = self._frame_features(camera, width, height, shade="color" in aovs)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
-        launches, order = self._frame_launches(features, tiles, width, height, aovs)
+        launches, order = self._frame_launches(camera, features, tiles, width, height, aovs)
         kernels = [self._kernel(defines) for defines, _ in launches]
         self.last_frame_packets = any(defines["PACKET_PRIMARY"] for defines, _ in launches)
         self.last_frame_tiles = None if order is None else tuple(launch.rows for _, launch in launches if launch)

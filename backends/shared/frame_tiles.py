@@ -10,8 +10,8 @@ import numpy as np
 
 from engine.camera_view import CameraView
 from engine.packed import Features
-from engine.portal_legs import portal_legs
-from engine.view_tiles import TILE_LOG2, tile_grid, view_tiles
+from engine.portal_legs import portal_legs, quad_corners
+from engine.view_tiles import TILE_LOG2, quad_tiles, view_tiles
 
 if TYPE_CHECKING:
     from backends.shared import UploadedScene
@@ -136,16 +136,24 @@ def frame_view_tiles(
     return FrameTiles(table, bool(portals), bool(instances), only, legs is not None, free)
 
 
-def portal_free_tiles(tiles: FrameTiles | None, features: Features, width: int, height: int) -> np.ndarray | None:
+def portal_free_tiles(
+    scene: UploadedScene, camera: CameraView, tiles: FrameTiles | None, features: Features, width: int, height: int
+) -> np.ndarray | None:
     """Per view tile, whether its camera rays' first legs meet no portal and take their instances from the tile's
     list: the frame's Euclidean variant gives those pixels to the bit (one leg, the same list, no event), so a
-    frame with portals may trace them with it (OpenCL's TILE_ORDER). None where the frame cannot split: no
-    portal lists, boxes or shadow rays (which may meet what no camera ray does), or no such tile."""
+    frame with portals may trace them with it (OpenCL's TILE_ORDER). A tile meets no portal where no quad the
+    camera sees covers it (:func:`engine.view_tiles.quad_tiles`: the tiles' portal lists, from the quads' boxes,
+    hold 1.4x the hotel's tiles). None where the frame cannot split: no portal lists, boxes or shadow rays
+    (which may meet what no camera ray does), or no such tile."""
     if tiles is None or not (tiles.portals and tiles.instances) or tiles.portal_legs:
         return None
-    if not features.portals or features.aberration_modes or features.shadows:
+    seen = scene._seen_portals
+    if not features.portals or features.aberration_modes or features.shadows or scene._portals is None:
         return None
-    tiles_x, tiles_y = tile_grid(width, height)
-    heads = tiles.table["entry"][: tiles_x * tiles_y]
-    free = (heads[:, 1] == 0) & (heads[:, 3] >= 0)
+    if seen is None or seen[0] is not camera or seen[1] != width / height:
+        return None
+    rows = scene._space_nodes["first"][seen[2]]
+    corners = quad_corners(scene._portals["world_to_local"][rows].astype(np.float64))
+    covered = quad_tiles(camera, width, height, scene._origin, corners)
+    free = ~covered & (tiles.table["entry"][: len(covered), 3] >= 0)
     return free if free.any() else None

@@ -48,6 +48,7 @@ def test_tiles_without_doors_give_the_one_launchs_frames(backend_factory, size):
     rng = np.random.default_rng(3)
     scene = doors(4)
     cameras = [((0.0, 1.8, 12.0), (0.0, 1.2, 0.0)), ((-9.0, 1.5, 6.0), (-9.0, 1.5, 2.0))]
+    cameras += [((-12.0, 1.6, 3.4), (10.0, 1.4, 2.9)), ((-11.0, 1.5, 3.05), (10.0, 1.5, 3.0))]  # along the doors
     lo, hi = np.array([-10.0, 0.5, 4.0]), np.array([10.0, 4.0, 14.0])
     cameras += [(tuple(rng.uniform(lo, hi)), (float(rng.uniform(-8.0, 8.0)), 1.5, 3.0)) for _ in range(3)]
     try:

@@ -16,8 +16,9 @@ from engine.box_clearance import instance_bounds
 from engine.camera_view import CameraView, boxes_seen, seen_leaves, view_planes, view_reaches
 from engine.maths import quat_to_matrix
 from engine.packing import ScenePacker
+from engine.portal_legs import quad_corners
 from engine.tlas_wide import TlasLanes
-from engine.view_tiles import tile_grid, view_tiles
+from engine.view_tiles import leaf_tiles, quad_tiles, tile_grid, view_tiles
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -208,3 +209,43 @@ def test_a_tile_with_too_many_instances_lists_none() -> None:
     for k in np.flatnonzero(~long):
         a, b = full[k, 2], capped[k, 2]
         assert np.array_equal(full[a : a + full[k, 3]], capped[b : b + capped[k, 3]])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_every_first_leg_portal_hit_lies_in_a_tile_its_quad_covers(seed: int) -> None:
+    """quad_tiles, which tells OpenCL's frames which tiles no portal can reach: every pixel whose primary ray
+    passes through a quad lies in a tile marked covered, from cameras among the portals, beside and inside
+    their boxes and turned at random; and it marks fewer tiles than the quads' box rects do."""
+    rng = np.random.default_rng(40 + seed)
+    scene = crowded("portals", 60, seed=seed)
+    packer = ScenePacker("f32")
+    packer.sync(scene)
+    packed = packer.packed
+    origin = np.asarray(packed.origin, dtype=np.float64)
+    portals = packed.tables["portals"][: packed.counts["portals"]]
+    corners = quad_corners(portals["world_to_local"].astype(np.float64))
+    hits = tighter = 0
+    for k in range(10):
+        width, height = (int(rng.integers(17, 90)), int(rng.integers(17, 90)))
+        if k % 2:  # beside or on a quad
+            quad = corners[int(rng.integers(len(corners)))]
+            position = origin + quad.mean(axis=0) + rng.normal(scale=0.3, size=3)
+        else:
+            position = np.array([rng.uniform(-5.0, 5.0), rng.uniform(0.2, 3.5), rng.uniform(-2.0, 8.0)])
+        view = CameraView(position, random_rotation(rng), float(rng.uniform(20.0, 120.0)), tuple(rng.uniform(0, 1, 2)))
+        (pixels, rows), _ = first_leg_hits(view, width, height, origin, portals)
+        tiles_x, _ = tile_grid(width, height)
+        tile = (pixels // width >> 3) * tiles_x + (pixels % width >> 3)
+        covered = quad_tiles(view, width, height, origin, corners)
+        assert covered[tile].all(), f"camera {k}: a portal hit in a tile marked free"
+        hits += len(pixels)
+        rects, _ = leaf_tiles(view, width, height, origin, corners.min(axis=1), corners.max(axis=1), 3)
+        for q, (x0, y0, x1, y1) in enumerate(rects):  # each quad's tiles within its box's rect
+            alone = quad_tiles(view, width, height, origin, corners[q : q + 1])
+            assert alone[tile[rows == q]].all(), f"camera {k}: a hit of portal {q} in a tile marked free"
+            alone = alone.reshape(-1, tiles_x)
+            rect = np.zeros_like(alone)
+            rect[y0 : y1 + 1, x0 : x1 + 1] = True
+            assert not (alone & ~rect).any()
+            tighter += int((rect & ~alone).sum())
+    assert hits > 0 and tighter > 0
