@@ -129,7 +129,7 @@ def quad_tiles(
     relative = corners - apex
     local = relative @ view.rotation  # right, up, back
     depth = -local[..., 2]
-    reach = np.linalg.norm(relative, axis=2).max(axis=1)
+    reach = np.sqrt(np.einsum("nkc,nkc->nk", relative, relative).max(axis=1))
     near = depth.min(axis=1) <= NEAR_PLANE * np.maximum(1.0, reach)
     t = math.tan(math.radians(view.fov_deg) / 2.0)
     scale_u, scale_v = width / (2.0 * (width / height) * t), height / (2.0 * t)
@@ -138,7 +138,7 @@ def quad_tiles(
     image = np.stack([x * scale_u + width / 2.0, height / 2.0 - y * scale_v], axis=2)  # (n, 4, 2)
     # The pad: leaf_tiles' pixels and margin, and how far the rays' and the quads' rounding (the kernels' pad, the
     # space trees' slack) can move a point of the quad's image, from its nearest corner.
-    grow = 2.0 * KERNEL_PAD * max(1.0, float(np.linalg.norm(apex))) + SPACE_SLACK * (
+    grow = 2.0 * KERNEL_PAD * max(1.0, math.sqrt(float(apex @ apex))) + SPACE_SLACK * (
         1.0 + np.abs(corners).max(axis=(1, 2))
     )
     slope = 1.0 + np.maximum(np.abs(x), np.abs(y)).max(axis=1)
@@ -159,11 +159,12 @@ def quad_tiles(
     down, across = np.divmod(np.arange(len(quad)) - np.repeat(np.cumsum(area) - area, area), np.repeat(w, area))
     tx, ty = rects[quad, 0] + across, rects[quad, 1] + down
     side_px = float(1 << log2)
+    # Per edge the bound n . p <= n . q + pad |n| of the padded image; a tile's nearest corner beyond it is cut.
+    bound = np.einsum("nkc,nkc->nk", normal, image) + pad[:, None] * np.hypot(normal[..., 0], normal[..., 1])
     n = normal[quad]  # (pairs, 4, 2)
-    nearest_x = np.where(n[..., 0] > 0.0, tx[:, None] * side_px, (tx[:, None] + 1) * side_px)
-    nearest_y = np.where(n[..., 1] > 0.0, ty[:, None] * side_px, (ty[:, None] + 1) * side_px)
-    beyond = n[..., 0] * (nearest_x - image[quad, :, 0]) + n[..., 1] * (nearest_y - image[quad, :, 1])
-    cut = (beyond > pad[quad, None] * np.linalg.norm(n, axis=2)).any(axis=1)
+    nearest_x = (tx[:, None] + (n[..., 0] <= 0.0)) * side_px
+    nearest_y = (ty[:, None] + (n[..., 1] <= 0.0)) * side_px
+    cut = (n[..., 0] * nearest_x + n[..., 1] * nearest_y > bound[quad]).any(axis=1)
     covered = np.zeros(tiles_x * tiles_y, bool)
     covered[(ty * tiles_x + tx)[~cut]] = True
     return covered
