@@ -20,7 +20,7 @@ from __future__ import annotations
 import hashlib
 import time
 from collections.abc import Sequence
-from dataclasses import replace
+from functools import partial
 from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
@@ -39,9 +39,8 @@ from backends.opencl.devices import (
     pocl_version,
     select_device,
 )
+from backends.opencl.frame_plan import frame_launches
 from backends.opencl.packets import packet_frame, work_size
-from backends.opencl.tile_order import TileLaunch, tile_order
-from backends.shared.frame_tiles import portal_free_tiles
 from engine import layout
 from engine.camera_view import CameraView, pack_camera
 from engine.errors import AberrantError, BackendUnavailable
@@ -346,8 +345,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
     def _frame_defines(
         self, features: Features, tiles: shared.FrameTiles | None, aovs: Sequence[str]
     ) -> dict[str, int]:
-        """A frame's kernel defines: the scene's, the camera row's proofs, the view tiles' and packets where the
-        frame qualifies (packets.py)."""
+        """A frame's kernel defines, after its camera row is packed: the scene's, the camera row's proofs, the view
+        tiles' and packets where the frame qualifies (packets.py)."""
         assert self._camera_row is not None
         defines = self._defines(features)
         defines["SHADE"] = int("color" in aovs)  # a frame without colour skips the shading (and its shadow rays)
@@ -357,33 +356,6 @@ class OpenClBackend(shared.UploadedScene, Backend):
         defines["PACKET_PRIMARY"] = int(packet_frame(defines, self.extra_defines.get("PACKET_PRIMARY", 1)))
         defines["TILE_ORDER"] = 0
         return defines
-
-    def _frame_launches(
-        self,
-        camera: CameraView,
-        features: Features,
-        tiles: shared.FrameTiles | None,
-        width: int,
-        height: int,
-        aovs: Sequence[str],
-    ) -> tuple[list[tuple[dict[str, int], TileLaunch | None]], np.ndarray | None]:
-        """The frame's launches (defines, tiles or None for the image's grid) and the tile order they read: a
-        frame with portals whose Euclidean variant takes packets traces the tiles that meet no portal with it
-        (tile_order.py), ``TILE_ORDER=0`` in the extra defines keeps one launch."""
-        defines = self._frame_defines(features, tiles, aovs)
-        wanted = self.extra_defines.get("TILE_ORDER", 1)
-        free = portal_free_tiles(self, camera, tiles, features, width, height) if wanted else None
-        if free is None or tiles is None:
-            return [(defines, None)], None
-        plain = self._frame_defines(
-            replace(features, portals=False), replace(tiles, portals=False, instances_only=True), aovs
-        )
-        if not plain["PACKET_PRIMARY"]:
-            return [(defines, None)], None
-        local = None if self.local_size is None else self.local_size[0] * self.local_size[1]
-        order, launches = tile_order([(np.flatnonzero(free), True), (np.flatnonzero(~free), False)], local)
-        plain["TILE_ORDER"] = defines["TILE_ORDER"] = 1
-        return [(plain, launches[0]), (defines, launches[1])], order
 
     def render(self, camera: CameraView, width: int, height: int, aovs: Sequence[str] = AOVS) -> Frame:
         """Launch one frame; reads back only the requested AOVs."""
@@ -395,7 +367,8 @@ class OpenClBackend(shared.UploadedScene, Backend):
         )
         features = self._frame_features(camera, width, height, shade="color" in aovs)
         tiles = self._frame_view_tiles(camera, width, height, features, self._camera_row)
-        launches, order = self._frame_launches(camera, features, tiles, width, height, aovs)
+        defines_of = partial(self._frame_defines, aovs=aovs)
+        launches, order = frame_launches(self, defines_of, self.local_size, camera, features, tiles, width, height)
         kernels = [self._kernel(defines) for defines, _ in launches]
         self.last_frame_packets = any(defines["PACKET_PRIMARY"] for defines, _ in launches)
         self.last_frame_tiles = None if order is None else tuple(launch.rows for _, launch in launches if launch)
