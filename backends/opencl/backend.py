@@ -59,7 +59,8 @@ _SOURCES: tuple[tuple[str, str], ...] = (
     ("backends.opencl", "packet.cl"),
     ("backends.opencl", "trace.cl"),
 )
-#: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, one buffer per AOV.
+#: Kernel arguments, in order (``trace.cl`` declares the same): the tables, the camera, the view tiles, the tile
+#: order (tile_order.py), one buffer per AOV.
 KERNEL_ARGS: tuple[str, ...] = (*layout.TABLES, "camera", "view_tiles", "tile_order", *(f"{name}_out" for name in AOVS))
 #: The BVH width each precision traverses fastest (see ``OpenClBackend.bvh_width``). The default
 #: ``BvhParams`` build the 8-wide trees too: CPU time per 800x800 frame (mesh-10k / mesh-200k /
